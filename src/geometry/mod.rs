@@ -1,0 +1,6 @@
+//! Pure geometry: the triangle mesh type, normalisation, surface sampling, marching cubes
+//! and the Chamfer distance. No I/O, no model, no async.
+
+pub mod mesh;
+
+pub use mesh::{Aabb, EdgeReport, MeshError, TriMesh};

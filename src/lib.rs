@@ -1,0 +1,14 @@
+//! aortagen: learns a generative neural signed-distance model of aortic shapes and serves
+//! synthetic patient cohorts for in-silico trials.
+//!
+//! The modules follow the architecture: pure geometry at the bottom, the learned model
+//! above it, and the command line (and later the HTTP service) on top.
+
+pub mod cli;
+pub mod formats;
+pub mod geometry;
+pub mod sdf;
+pub mod synth;
+
+/// Software version recorded in every artefact's provenance.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

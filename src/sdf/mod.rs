@@ -1,0 +1,1 @@
+//! The neural signed-distance auto-decoder (burn): model, loss, training and inference.

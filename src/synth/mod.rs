@@ -1,0 +1,1 @@
+//! The embedded default dataset: parametric aortic-root surfaces in millimetres.
