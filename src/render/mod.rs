@@ -208,6 +208,8 @@ pub fn render_meshes(
         inside: to_f(view.inside_colour),
         light,
         ambient: 0.22,
+        specular: 0.18,
+        shininess: 40,
     };
     let mut canvas = Canvas::new(w, h, to_f(view.background));
     for (i, (mesh, verts)) in meshes.iter().zip(&projected).enumerate() {

@@ -39,7 +39,12 @@ fn facing_shade(colour: u8) -> u8 {
     let light = [-0.35f64, 0.55, 1.0];
     let lambert = 1.0 / light.iter().map(|c| c * c).sum::<f64>().sqrt();
     let shade = 0.22 + 0.78 * lambert;
-    (f64::from(colour) / 255.0 * shade * 255.0).round() as u8
+    // Blinn–Phong highlight with the half vector of light and view (+z).
+    let n = light.iter().map(|c| c * c).sum::<f64>().sqrt();
+    let half = [light[0] / n, light[1] / n, light[2] / n + 1.0];
+    let half_z = half[2] / half.iter().map(|c| c * c).sum::<f64>().sqrt();
+    let highlight = 0.18 * half_z.powi(40);
+    ((f64::from(colour) / 255.0 * shade + highlight).min(1.0) * 255.0).round() as u8
 }
 
 fn covered(img: &RgbImage, background: [u8; 3]) -> usize {
