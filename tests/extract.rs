@@ -321,3 +321,18 @@ fn bad_fields_and_options_are_named_in_the_error() {
         ExtractError::Lipschitz(f32::INFINITY)
     );
 }
+
+#[test]
+fn a_field_without_a_surface_in_the_box_gives_an_empty_mesh() {
+    let far = Shape::Sphere {
+        centre: [3.0, 0.0, 0.0],
+        radius: 0.5,
+    };
+    let out = extract_surface(&far, 40, &ExtractOptions::default()).unwrap();
+    assert_eq!((out.mesh.vertex_count(), out.mesh.triangle_count()), (0, 0));
+    assert_eq!(out.kept_blocks, 0);
+    assert_eq!(
+        out.evaluations.samples, 0,
+        "nothing sampled beyond the coarse centres"
+    );
+}
