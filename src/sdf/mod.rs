@@ -1,1 +1,24 @@
-//! The neural signed-distance auto-decoder (burn): model, loss, training and inference.
+//! The neural signed-distance auto-decoder (burn): model, loss, training step and inference.
+//!
+//! - [`backend`]: the only place a compute backend / device is chosen.
+//! - [`network`]: the DeepSDF/IGR MLP and its explicit input gradient ∇ₓf.
+//! - [`decoder`]: network + per-shape latent table.
+//! - [`loss`]: the IGR loss over a [`TrainingBatch`].
+//! - [`step`]: one Adam step ([`SdfTrainer`]).
+//! - [`field`]: fast evaluation of f and ∇f for one latent over many points.
+//!
+//! Sign convention: f < 0 inside, f > 0 outside (forced by the loss with outward normals).
+
+pub mod backend;
+pub mod decoder;
+pub mod field;
+pub mod loss;
+pub mod network;
+pub mod step;
+
+pub use backend::{Backend, BackendError};
+pub use decoder::SdfAutoDecoder;
+pub use field::SdfField;
+pub use loss::{BatchError, IgrLossConfig, LossTerms, TrainingBatch, igr_loss};
+pub use network::{LatentOffsets, NetworkConfigError, SdfNetwork, SdfNetworkConfig, SdfOutput};
+pub use step::{SdfTrainer, TrainStepConfig, TrainStepOutput};
