@@ -7,6 +7,7 @@
 pub mod cli;
 pub mod formats;
 pub mod geometry;
+pub mod render;
 pub mod sdf;
 pub mod synth;
 

@@ -2,6 +2,9 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod render;
+pub mod synth;
+
 /// Generative models of aortic shapes and synthetic cohorts for in-silico trials.
 #[derive(Debug, Parser)]
 #[command(name = "aortagen", version, about)]
@@ -13,10 +16,18 @@ pub struct Cli {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Generate parametric aortic roots with their ground-truth parameters.
+    Synth(synth::SynthArgs),
+    /// Render meshes side by side into a PNG.
+    Render(render::RenderArgs),
+}
 
 /// Parses the process arguments and runs the chosen subcommand.
 pub fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Synth(args) => synth::run(args),
+        Command::Render(args) => render::run(args),
+    }
 }
