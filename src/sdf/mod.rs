@@ -6,6 +6,9 @@
 //! - [`loss`]: the IGR loss over a [`TrainingBatch`].
 //! - [`step`]: one Adam step ([`SdfTrainer`]).
 //! - [`field`]: fast evaluation of f and ∇f for one latent over many points.
+//! - [`data`], [`cache`], [`batch`]: training shapes, their one-off samples, reproducible batches.
+//! - [`config`], [`training`], [`manifest`], [`store`]: the training loop and saved models.
+//! - [`reconstruct`], [`evaluation`], [`generate`]: meshes, fidelity and new shapes from latents.
 //!
 //! Sign convention: f < 0 inside, f > 0 outside (forced by the loss with outward normals).
 
@@ -22,3 +25,14 @@ pub use field::SdfField;
 pub use loss::{BatchError, IgrLossConfig, LossTerms, TrainingBatch, igr_loss};
 pub use network::{LatentOffsets, NetworkConfigError, SdfNetwork, SdfNetworkConfig, SdfOutput};
 pub use step::{SdfTrainer, TrainStepConfig, TrainStepOutput};
+
+pub mod batch;
+pub mod cache;
+pub mod config;
+pub mod data;
+pub mod evaluation;
+pub mod generate;
+pub mod manifest;
+pub mod reconstruct;
+pub mod store;
+pub mod training;

@@ -8,8 +8,8 @@
 
 use std::path::{Path, PathBuf};
 
-use burn::optim::{AdamConfig, ModuleOptimizer};
-use burn::store::{BurnpackStore, ModuleSnapshot, ModuleStore};
+use burn::optim::ModuleOptimizer;
+use burn::store::{BurnpackStore, ModuleSnapshot};
 use burn::tensor::{Bytes, Device};
 use sha2::{Digest, Sha256};
 
@@ -180,19 +180,19 @@ pub fn load_decoder(
     Ok(decoder)
 }
 
-/// Loads the saved Adam state (for `--resume`).
+/// Loads the saved Adam state into `fresh` (an optimizer built like the saved one), for
+/// `--resume`.
 pub fn load_optimizer(
     dir: &Path,
     manifest: &ModelManifest,
-    config: AdamConfig,
+    fresh: ModuleOptimizer,
 ) -> Result<ModuleOptimizer, ModelLoadError> {
     let record = manifest.optimizer.as_ref().ok_or(ModelLoadError::MissingFile {
         path: dir.join(OPTIMIZER_FILE),
     })?;
     let path = dir.join(&record.file);
     let bytes = read_checked(&path, record)?;
-    config
-        .init()
+    fresh
         .from_bytes(Bytes::from_bytes_vec(bytes))
         .map_err(|e| ModelLoadError::Corrupted {
             path,
