@@ -112,14 +112,19 @@ impl TrainArgs {
 /// Runs `aortagen train`.
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     init_logging();
-    ctrlc::set_handler(|| {
+    STOP.store(false, Ordering::SeqCst);
+    let installed = ctrlc::set_handler(|| {
         if STOP.swap(true, Ordering::SeqCst) {
             eprintln!("second interrupt: exiting without a checkpoint");
             std::process::exit(130);
         }
         eprintln!("interrupt: finishing the current step, then writing a checkpoint");
-    })
-    .context("cannot install the Ctrl-C handler")?;
+    });
+    match installed {
+        // Already installed by an earlier run in this process: it sets the same flag.
+        Ok(()) | Err(ctrlc::Error::MultipleHandlers) => {}
+        Err(e) => return Err(e).context("cannot install the Ctrl-C handler"),
+    }
     let request = TrainingRequest {
         out_dir: args.out.clone(),
         source: args.source(),

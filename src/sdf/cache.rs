@@ -191,3 +191,72 @@ impl Reader<'_> {
 pub fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetrahedron(scale: f32) -> TriMesh {
+        let p = [[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]];
+        let positions = p.iter().map(|v: &[f32; 3]| v.map(|c| c * scale)).collect();
+        TriMesh::new(positions, vec![[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
+    }
+
+    fn inputs() -> (Vec<(String, TriMesh)>, SamplingSettings) {
+        let meshes = vec![("a".into(), tetrahedron(2.0)), ("b".into(), tetrahedron(5.0))];
+        let settings = SamplingSettings {
+            points_per_shape: 300,
+            knn_k: 10,
+            seed: 3,
+        };
+        (meshes, settings)
+    }
+
+    #[test]
+    fn the_cache_round_trips_and_is_reused() {
+        let dir = tempfile::tempdir().unwrap();
+        let (meshes, settings) = inputs();
+        let (first, key) = prepare_cached(&meshes, &settings, Some(dir.path())).unwrap();
+        let path = cache_path(dir.path(), &key);
+        assert_eq!(read_cache(&path).unwrap(), first);
+        // A second call reads the file: prove it by planting a recognisable (valid) change.
+        let mut planted = first.clone();
+        planted.shapes[0].sigma[0] = 123.0;
+        write_cache(&path, &planted).unwrap();
+        let (again, _) = prepare_cached(&meshes, &settings, Some(dir.path())).unwrap();
+        assert_eq!(again.shapes[0].sigma[0], 123.0);
+        assert!((first.shapes[1].transform.radius - 5.0 * 3f64.sqrt()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn any_input_change_changes_the_key() {
+        let (meshes, settings) = inputs();
+        let key = dataset_key(&meshes, &settings);
+        let mut other = settings;
+        other.seed += 1;
+        assert_ne!(key, dataset_key(&meshes, &other));
+        let mut moved = meshes.clone();
+        moved[1].1.positions[0][0] += 1e-3;
+        assert_ne!(key, dataset_key(&moved, &settings));
+        let mut renamed = meshes.clone();
+        renamed[0].0 = "c".into();
+        assert_ne!(key, dataset_key(&renamed, &settings));
+    }
+
+    #[test]
+    fn damaged_caches_are_rejected_and_rebuilt() {
+        let dir = tempfile::tempdir().unwrap();
+        let (meshes, settings) = inputs();
+        let (first, key) = prepare_cached(&meshes, &settings, Some(dir.path())).unwrap();
+        let path = cache_path(dir.path(), &key);
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[100] ^= 0x40;
+        std::fs::write(&path, &bytes).unwrap();
+        assert!(read_cache(&path).unwrap_err().to_string().contains("checksum"));
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        assert!(read_cache(&path).is_err());
+        let (rebuilt, _) = prepare_cached(&meshes, &settings, Some(dir.path())).unwrap();
+        assert_eq!(rebuilt, first);
+        assert_eq!(read_cache(&path).unwrap(), first);
+    }
+}

@@ -181,3 +181,49 @@ impl TrainingConfig {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_learning_rate_halves_every_interval() {
+        let t = Preset::Paper.setup(0).training;
+        assert_eq!(t.learning_rate_at(0), 1e-3);
+        assert_eq!(t.learning_rate_at(499), 1e-3);
+        assert_eq!(t.learning_rate_at(500), 5e-4);
+        assert_eq!(t.learning_rate_at(1999), 1.25e-4);
+        let never = TrainingConfig {
+            lr_halving_epochs: 0,
+            ..t
+        };
+        assert_eq!(never.learning_rate_at(10_000), 1e-3);
+    }
+
+    #[test]
+    fn the_paper_preset_has_the_papers_values() {
+        let s = Preset::Paper.setup(4);
+        assert_eq!((s.network.latent_dim, s.network.hidden), (256, 512));
+        assert_eq!((s.network.hidden_layers, s.network.skip_layer), (8, 4));
+        assert_eq!(s.network.beta, 100.0);
+        assert_eq!((s.training.epochs, s.training.tau, s.training.lambda), (5000, 0.5, 1e-4));
+        assert_eq!((s.sampling.points_per_shape, s.sampling.knn_k), (500_000, 50));
+        assert_eq!((s.training.seed, s.sampling.seed), (4, 4));
+        assert_eq!(Preset::Cpu.setup(0).training.validate(), Ok(()));
+    }
+
+    #[test]
+    fn unusable_settings_name_the_setting() {
+        let t = Preset::Cpu.setup(0).training;
+        let bad = TrainingConfig {
+            batch_shapes: 0,
+            ..t.clone()
+        };
+        assert_eq!(bad.validate().unwrap_err().field, "batch_shapes");
+        let bad = TrainingConfig {
+            learning_rate: f64::NAN,
+            ..t
+        };
+        assert!(bad.validate().unwrap_err().to_string().contains("learning_rate"));
+    }
+}

@@ -190,3 +190,45 @@ pub fn local_sigma(points: &[[f32; 3]], k: usize) -> anyhow::Result<Vec<f32>> {
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    #[test]
+    fn local_sigma_is_the_distance_to_the_kth_other_point() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let points: Vec<[f32; 3]> = (0..300)
+            .map(|_| std::array::from_fn(|_| rng.random_range(-1.0f32..1.0)))
+            .collect();
+        let k = 5;
+        let sigma = local_sigma(&points, k).unwrap();
+        for (i, p) in points.iter().enumerate() {
+            let mut d: Vec<f32> = points
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f32>().sqrt())
+                .collect();
+            d.sort_by(f32::total_cmp);
+            assert!((sigma[i] - d[k - 1]).abs() < 1e-5, "point {i}");
+        }
+    }
+
+    #[test]
+    fn local_sigma_needs_more_points_than_k() {
+        let err = local_sigma(&[[0.0; 3]; 5], 5).unwrap_err().to_string();
+        assert!(err.contains("k = 5"), "{err}");
+    }
+
+    #[test]
+    fn a_directory_without_meshes_is_reported_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("notes.txt"), "x").unwrap();
+        let err = read_mesh_directory(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("no mesh files"), "{err}");
+        let err = read_mesh_directory(&dir.path().join("absent")).unwrap_err();
+        assert!(format!("{err:#}").contains("absent"), "{err:#}");
+    }
+}

@@ -207,3 +207,33 @@ pub fn histogram(sorted: &[f64], bins: usize) -> Option<Histogram> {
     }
     Some(Histogram { edges, counts })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantiles_interpolate_between_order_statistics() {
+        let v = [1.0, 2.0, 3.0, 4.0, 5.0];
+        assert_eq!(quantile(&v, 0.5), 3.0);
+        assert_eq!(quantile(&v, 0.25), 2.0);
+        assert_eq!(quantile(&v, 0.9), 4.6);
+        assert_eq!(quantile(&[2.0, 4.0], 0.5), 3.0);
+        assert!(quantile(&[], 0.5).is_nan());
+        let s = summarize(&v).unwrap();
+        assert_eq!((s.count, s.min, s.max, s.mean), (5, 1.0, 5.0, 3.0));
+        assert!(summarize(&[]).is_none());
+    }
+
+    #[test]
+    fn the_histogram_counts_every_value_in_log_bins() {
+        let v = [1e-4, 2e-4, 1e-3, 5e-3, 1e-2];
+        let h = histogram(&v, 2).unwrap();
+        assert_eq!(h.edges.len(), 3);
+        assert!((h.edges[0] - 1e-4).abs() < 1e-12 && (h.edges[2] - 1e-2).abs() < 1e-12);
+        assert!((h.edges[1] - 1e-3).abs() < 1e-12);
+        assert_eq!(h.counts, [2, 3]);
+        let single = histogram(&[0.5, 0.5], 10).unwrap();
+        assert_eq!(single.counts, [2]);
+    }
+}

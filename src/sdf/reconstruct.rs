@@ -88,3 +88,41 @@ fn unit_or_zero(g: [f32; 3]) -> [f32; 3] {
         [0.0; 3]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sdf::backend::Backend;
+    use crate::sdf::network::SdfNetworkConfig;
+
+    /// The untrained network is ≈ the SDF of a sphere of radius `radius_init` (geometric
+    /// initialisation), which gives an exact reference for the whole latent → mesh path.
+    #[test]
+    fn an_untrained_network_reconstructs_its_initial_sphere() {
+        let device = Backend::default().device(false).unwrap();
+        let config = SdfNetworkConfig::new().with_latent_dim(4).with_hidden(32);
+        let network = config.init(1, &device).unwrap();
+        let field = SdfField::new(&network, &[0.0; 4]).unwrap();
+        let mesh = reconstruct_mesh(&field, 24).unwrap();
+        mesh.validate().unwrap();
+        let report = mesh.edge_report();
+        assert!(report.is_closed_and_oriented(), "{report:?}");
+        let r0 = config.radius_init as f32;
+        let normals = mesh.normals.as_ref().unwrap();
+        for (p, n) in mesh.positions.iter().zip(normals) {
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            assert!((r - r0).abs() < 0.05 * r0, "vertex radius {r}");
+            let radial: f32 = (0..3).map(|c| n[c] * p[c] / r).sum();
+            assert!(radial > 0.95, "normal points outward ({radial})");
+        }
+        assert!(mesh.signed_volume() > 0.0);
+    }
+
+    #[test]
+    fn resolutions_below_two_are_rejected() {
+        let device = Backend::default().device(false).unwrap();
+        let network = SdfNetworkConfig::new().with_latent_dim(2).with_hidden(8);
+        let field = SdfField::new(&network.init(0, &device).unwrap(), &[0.0; 2]).unwrap();
+        assert_eq!(reconstruct_mesh(&field, 1).unwrap_err(), ReconstructError::Resolution(1));
+    }
+}
