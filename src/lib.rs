@@ -5,6 +5,7 @@
 //! above it, and the command line (and later the HTTP service) on top.
 
 pub mod cli;
+pub mod extract;
 pub mod formats;
 pub mod geometry;
 pub mod render;

@@ -2,6 +2,10 @@
 //! and the Chamfer distance. No I/O, no model, no async.
 
 pub mod chamfer;
+pub mod marching_cubes;
+pub(crate) mod mc_cell;
+pub(crate) mod mc_dense;
+pub(crate) mod mc_tables;
 pub mod mesh;
 pub mod normalize;
 pub mod sampling;
