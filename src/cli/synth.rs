@@ -91,18 +91,22 @@ struct Manifest {
 
 const FRAME: &str = "annulus centre at the origin, outflow axis +z, annulus major axis +x";
 
-/// Writes `mesh` to `path` in `format`. PLY is written natively; the other formats are
-/// delegated to the general mesh writers when those are part of the build.
-pub fn write_mesh(path: &Path, mesh: &TriMesh, format: SynthFormat) -> anyhow::Result<()> {
-    let bytes = match format {
-        SynthFormat::Ply => {
-            crate::synth::ply::write_ply(mesh, "aortagen parametric aortic root, units mm")
-        }
+/// Fails unless this build can write `format`. PLY is written natively; the other formats
+/// need the general mesh writers.
+pub fn check_format(format: SynthFormat) -> anyhow::Result<()> {
+    match format {
+        SynthFormat::Ply => Ok(()),
         other => bail!(
             "format `{}` is not available in this build; use --format ply",
             other.extension()
         ),
-    };
+    }
+}
+
+/// Writes `mesh` to `path` in `format`.
+pub fn write_mesh(path: &Path, mesh: &TriMesh, format: SynthFormat) -> anyhow::Result<()> {
+    check_format(format)?;
+    let bytes = crate::synth::ply::write_ply(mesh, "aortagen parametric aortic root, units mm");
     std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
@@ -111,20 +115,12 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
     if args.count == 0 {
         bail!("--count must be at least 1");
     }
+    check_format(args.format)?; // fail before any work
     let closed = !args.open;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
     let digits = (args.count - 1).to_string().len().max(3);
     let name = |i: usize, ext: &str| format!("root_{i:0digits$}.{ext}");
-    // Fail early (before minutes of work) on formats this build cannot write.
-    if args.format != SynthFormat::Ply {
-        write_mesh(
-            &args.out.join(name(0, args.format.extension())),
-            &TriMesh::default(),
-            args.format,
-        )?;
-    }
-
     let progress = Progress::new(args.count);
     (0..args.count)
         .into_par_iter()
@@ -203,7 +199,7 @@ impl Progress {
         let done = self.done.fetch_add(1, Ordering::Relaxed) + 1;
         match &self.bar {
             Some(bar) => bar.inc(1),
-            None if done % (self.total / 10).max(1) == 0 || done == self.total => {
+            None if done.is_multiple_of((self.total / 10).max(1)) || done == self.total => {
                 tracing::info!(done, total = self.total, "synth progress");
             }
             None => {}

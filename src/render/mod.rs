@@ -1,5 +1,6 @@
 //! A small software renderer so the project draws its own pictures (README figures,
-//! the worst reconstruction of an evaluation): orthographic, z-buffered, Lambert-shaded,
+//! the worst reconstruction of an evaluation): orthographic, z-buffered, Lambert-shaded
+//! (smooth with the mesh's vertex normals, flat without),
 //! several meshes side by side at one common scale, written as PNG.
 
 mod png_out;
@@ -107,20 +108,21 @@ impl Camera {
         } else {
             [0.0, 1.0, 0.0]
         };
-        let h2 = normalized(cross(up, helper));
-        let h1 = cross(h2, up);
         if dot(up, up) == 0.0 {
             return Err(RenderError::BadView("the up vector is zero".into()));
         }
+        let h2 = normalized(cross(up, helper));
+        let h1 = cross(h2, up);
         let (sa, ca) = view.azimuth_deg.to_radians().sin_cos();
         let (se, ce) = view.elevation_deg.to_radians().sin_cos();
         let toward: [f64; 3] = std::array::from_fn(|i| ce * (ca * h1[i] + sa * h2[i]) + se * up[i]);
-        let right = normalized(cross(up, toward));
-        if dot(right, right) == 0.0 {
+        let side = cross(up, toward);
+        if dot(side, side) < 1e-12 {
             return Err(RenderError::BadView(
-                "elevation of ±90° leaves no horizon".into(),
+                "an elevation of ±90° leaves no horizon".into(),
             ));
         }
+        let right = normalized(side);
         Ok(Self {
             right,
             up: cross(toward, right),
@@ -206,6 +208,8 @@ pub fn render_meshes(
         inside: to_f(view.inside_colour),
         light,
         ambient: 0.22,
+        specular: 0.18,
+        shininess: 40,
     };
     let mut canvas = Canvas::new(w, h, to_f(view.background));
     for (i, (mesh, verts)) in meshes.iter().zip(&projected).enumerate() {
@@ -219,23 +223,22 @@ pub fn render_meshes(
                 -q[2],
             ]
         };
-        let normals: Vec<[f64; 3]> = match &mesh.normals {
-            Some(n) => n
-                .iter()
+        // Smooth shading with the mesh's own normals; flat shading without them.
+        let normals: Option<Vec<[f64; 3]>> = mesh.normals.as_ref().map(|n| {
+            n.iter()
                 .map(|v| camera.to_camera(v.map(f64::from)))
-                .collect(),
-            None => mesh
-                .compute_vertex_normals()
-                .iter()
-                .map(|v| camera.to_camera(v.map(f64::from)))
-                .collect(),
-        };
+                .collect()
+        });
         for t in &mesh.triangles {
             let [a, b, c] = t.map(|k| verts[k as usize]);
+            let face = face_normal(a, b, c);
             let tri = ScreenTriangle {
                 corners: [to_pixel(a), to_pixel(b), to_pixel(c)],
-                normals: t.map(|k| normals[k as usize]),
-                face_normal: face_normal(a, b, c),
+                normals: match &normals {
+                    Some(n) => t.map(|k| n[k as usize]),
+                    None => [face; 3],
+                },
+                face_normal: face,
             };
             canvas.draw(&tri, &material);
         }

@@ -1,4 +1,5 @@
-//! Z-buffered triangle rasterisation with Lambert shading into an RGB buffer.
+//! Z-buffered triangle rasterisation with Lambert shading (plus a faint highlight) into an
+//! RGB buffer.
 
 use crate::geometry::mesh::{cross, dot, normalized, sub};
 
@@ -19,6 +20,9 @@ pub(crate) struct Material {
     pub inside: [f64; 3],
     pub light: [f64; 3],
     pub ambient: f64,
+    /// Strength and exponent of a white Blinn–Phong highlight (viewer along +z).
+    pub specular: f64,
+    pub shininess: i32,
 }
 
 /// Colour and depth buffers of a frame.
@@ -81,7 +85,13 @@ impl Canvas {
                 }));
                 let lambert = dot(n, material.light).max(0.0);
                 let shade = material.ambient + (1.0 - material.ambient) * lambert;
-                self.colour[k] = base.map(|ch| ch * shade);
+                let half = normalized([
+                    material.light[0],
+                    material.light[1],
+                    material.light[2] + 1.0,
+                ]);
+                let highlight = material.specular * dot(n, half).max(0.0).powi(material.shininess);
+                self.colour[k] = base.map(|ch| (ch * shade + highlight).min(1.0));
             }
         }
     }

@@ -1,12 +1,15 @@
 //! Shape parameters of a parametric aortic root and how they are drawn from published
 //! normal adult ranges.
 //!
-//! Every diameter is drawn as `lo + (hi − lo)·t` with `t = 0.7·size + 0.3·own`, where `size`
+//! Every length is drawn as `lo + (hi − lo)·t` with `t = 0.8·size + 0.2·own`, where `size`
 //! is one bell-shaped body-size factor shared by the whole shape and `own` is independent per
 //! parameter. The shared factor reproduces the strong correlation between the levels of a real
 //! root (large annulus ⇒ large sinus), keeps the ratios near the published ones
 //! (STJ/annulus ≈ 1.15, sinus/annulus ≈ 1.4 at the centre of the ranges, Vriz et al. 2014) and
-//! guarantees the ordering sinus > max(annulus, STJ) by construction (see [`AorticRootParams::validate`]).
+//! guarantees by construction the ordering of a normal root: the sinus is wider than the
+//! annulus major axis and the STJ by at least 3 mm (checked by [`AorticRootParams::validate`])
+//! and wider than the ascending aorta (Schaefer et al., Heart 2008;94:1634–1638:
+//! the normal "N" root shape).
 //!
 //! All draws use only `next_u64` and IEEE arithmetic (no `ln`/`cos`), so a seed gives the same
 //! shape on every platform.
@@ -201,7 +204,7 @@ fn unit<R: Rng + ?Sized>(rng: &mut R) -> f64 {
 pub fn sample_params<R: Rng + ?Sized>(rng: &mut R) -> AorticRootParams {
     // Bell-shaped body-size factor in [0, 1] (mean of three uniforms).
     let size = (unit(rng) + unit(rng) + unit(rng)) / 3.0;
-    let mut correlated = |range: Range| range.at(0.7 * size + 0.3 * unit(rng));
+    let mut correlated = |range: Range| range.at(0.8 * size + 0.2 * unit(rng));
     let annulus_diameter_mm = correlated(ANNULUS_DIAMETER);
     let sinus_diameter_mm = correlated(SINUS_DIAMETER);
     let sinus_height_mm = correlated(SINUS_HEIGHT);

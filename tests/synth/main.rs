@@ -1,0 +1,7 @@
+//! Parametric aortic roots, the software renderer and their commands.
+
+mod cli;
+mod intersect;
+mod params;
+mod render;
+mod surface;
