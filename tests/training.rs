@@ -28,10 +28,18 @@ fn tiny_setup(epochs: u64) -> TrainingSetup {
     setup
 }
 
-fn request<'a>(dir: &Path, epochs: u64, resume: bool, stop: Option<&'a AtomicBool>) -> TrainingRequest<'a> {
+fn request<'a>(
+    dir: &Path,
+    epochs: u64,
+    resume: bool,
+    stop: Option<&'a AtomicBool>,
+) -> TrainingRequest<'a> {
     TrainingRequest {
         out_dir: dir.to_path_buf(),
-        source: DataSource::Synth { count: SHAPES, seed: 5 },
+        source: DataSource::Synth {
+            count: SHAPES,
+            seed: 5,
+        },
         setup: tiny_setup(epochs),
         backend: Backend::Flex,
         resume,
@@ -67,11 +75,17 @@ fn a_tiny_run_trains_saves_loads_and_evaluates() {
     assert!(outcome.finished && outcome.manifest.progress.complete);
     let model = load(dir.path());
     let m = &model.manifest;
-    assert_eq!(m.loss_history.iter().map(|l| l.epoch).collect::<Vec<_>>(), [1, 2, 3, 4, 5, 6]);
+    assert_eq!(
+        m.loss_history.iter().map(|l| l.epoch).collect::<Vec<_>>(),
+        [1, 2, 3, 4, 5, 6]
+    );
     let (first, last) = (m.loss_history[0].total, m.loss_history[5].total);
     assert!(last < 0.8 * first, "loss falls: {first} → {last}");
     assert_eq!((m.architecture.latent_dim, m.architecture.hidden), (8, 32));
-    assert_eq!((m.backend.as_str(), m.software_version.as_str()), ("flex", aortagen::VERSION));
+    assert_eq!(
+        (m.backend.as_str(), m.software_version.as_str()),
+        ("flex", aortagen::VERSION)
+    );
     // The stored transforms are the shapes' unit-ball normalisations.
     let meshes = load_source_meshes(&m.data.source).unwrap();
     for ((name, mesh), record) in meshes.iter().zip(&m.shapes) {
@@ -79,13 +93,24 @@ fn a_tiny_run_trains_saves_loads_and_evaluates() {
         assert_eq!(normalize_to_unit_ball(mesh).1, record.transform);
     }
     let originals: Vec<_> = meshes.into_iter().map(|(_, mesh)| mesh).collect();
-    let settings = EvaluationSettings { resolution: 24, chamfer_points: 1500, seed: 1 };
+    let settings = EvaluationSettings {
+        resolution: 24,
+        chamfer_points: 1500,
+        seed: 1,
+    };
     let mut seen = 0;
     let report = evaluate_model(&model, &originals, &settings, &mut |_| seen += 1).unwrap();
-    assert_eq!((seen, report.failures, report.shapes.len()), (SHAPES, 0, SHAPES));
+    assert_eq!(
+        (seen, report.failures, report.shapes.len()),
+        (SHAPES, 0, SHAPES)
+    );
     for shape in &report.shapes {
         let cd = shape.chamfer.unwrap();
-        assert!(cd.is_finite() && cd > shape.sampling_floor, "{}: {cd}", shape.name);
+        assert!(
+            cd.is_finite() && cd > shape.sampling_floor,
+            "{}: {cd}",
+            shape.name
+        );
         assert!(cd < 0.5, "a reconstruction inside the unit ball: {cd}");
     }
     let summary = report.summary.unwrap();
@@ -125,10 +150,19 @@ fn an_interrupt_mid_epoch_checkpoints_and_resumes_exactly() {
     let full = train_tiny(straight.path(), 4);
     let flag = AtomicBool::new(false);
     // 3 shapes in batches of 2: two steps per epoch; step 5 is the first of epoch 3.
-    let mut observer = StopAfter { steps: 5, flag: &flag };
+    let mut observer = StopAfter {
+        steps: 5,
+        flag: &flag,
+    };
     let stopped = train(&request(split.path(), 4, false, Some(&flag)), &mut observer).unwrap();
     assert!(!stopped.finished);
-    assert_eq!((stopped.manifest.progress.epochs_completed, stopped.manifest.progress.next_batch), (2, 1));
+    assert_eq!(
+        (
+            stopped.manifest.progress.epochs_completed,
+            stopped.manifest.progress.next_batch
+        ),
+        (2, 1)
+    );
     let resumed = train(&request(split.path(), 4, true, None), &mut Silent).unwrap();
     assert!(resumed.finished);
     assert_eq!(resumed.manifest.loss_history, full.manifest.loss_history);
@@ -157,7 +191,8 @@ fn damaged(model: &Path, damage: impl FnOnce(&Path)) -> tempfile::TempDir {
 
 fn edit_manifest(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
     let path = dir.join("manifest.json");
-    let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
     edit(&mut json);
     std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
 }
@@ -166,7 +201,9 @@ fn edit_manifest(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
 fn replace_weights(dir: &Path, bytes: &[u8]) {
     std::fs::write(dir.join("weights.bpk"), bytes).unwrap();
     let record = aortagen::sdf::store::file_record("weights.bpk", bytes);
-    edit_manifest(dir, |m| m["weights"] = serde_json::to_value(&record).unwrap());
+    edit_manifest(dir, |m| {
+        m["weights"] = serde_json::to_value(&record).unwrap()
+    });
 }
 
 #[test]
@@ -177,35 +214,100 @@ fn every_kind_of_broken_model_directory_is_a_clear_error() {
     let weights = std::fs::read(t.join("weights.bpk")).unwrap();
     type Check = fn(&ModelLoadError) -> bool;
     let cases: Vec<(&str, tempfile::TempDir, Check)> = vec![
-        ("no manifest", damaged(t, |d| std::fs::remove_file(d.join("manifest.json")).unwrap()),
-            |e| matches!(e, ModelLoadError::MissingFile { path } if path.ends_with("manifest.json"))),
-        ("no weights", damaged(t, |d| std::fs::remove_file(d.join("weights.bpk")).unwrap()),
-            |e| matches!(e, ModelLoadError::MissingFile { path } if path.ends_with("weights.bpk"))),
-        ("manifest not JSON", damaged(t, |d| std::fs::write(d.join("manifest.json"), "solid x").unwrap()),
-            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("not JSON"))),
-        ("foreign JSON", damaged(t, |d| std::fs::write(d.join("manifest.json"), r#"{"name":"x"}"#).unwrap()),
-            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("format"))),
-        ("future version", damaged(t, |d| edit_manifest(d, |m| m["format_version"] = 99.into())),
-            |e| matches!(e, ModelLoadError::UnsupportedVersion { found: 99, supported: 1, .. })),
-        ("missing field", damaged(t, |d| edit_manifest(d, |m| { m.as_object_mut().unwrap().remove("shapes"); })),
-            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("shapes"))),
-        ("truncated weights", damaged(t, |d| std::fs::write(d.join("weights.bpk"), &weights[..weights.len() - 9]).unwrap()),
-            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("truncated"))),
-        ("flipped byte", damaged(t, |d| {
-            let mut w = weights.clone();
-            let mid = w.len() / 2;
-            w[mid] ^= 1;
-            std::fs::write(d.join("weights.bpk"), w).unwrap();
-        }), |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("SHA-256"))),
-        ("garbage with a matching hash", damaged(t, |d| replace_weights(d, &[7u8; 300])),
-            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("burnpack"))),
-        ("other width", damaged(t, |d| edit_manifest(d, |m| m["architecture"]["hidden"] = 16.into())),
-            |e| matches!(e, ModelLoadError::ArchitectureMismatch { .. })),
-        ("fewer shapes than latents", damaged(t, |d| edit_manifest(d, |m| {
-            m["shapes"].as_array_mut().unwrap().pop();
-        })), |e| matches!(e, ModelLoadError::ArchitectureMismatch { detail, .. } if detail.contains("latents"))),
-        ("invalid architecture", damaged(t, |d| edit_manifest(d, |m| m["architecture"]["hidden"] = 0.into())),
-            |e| matches!(e, ModelLoadError::InvalidArchitecture(_))),
+        (
+            "no manifest",
+            damaged(t, |d| {
+                std::fs::remove_file(d.join("manifest.json")).unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::MissingFile { path } if path.ends_with("manifest.json")),
+        ),
+        (
+            "no weights",
+            damaged(t, |d| std::fs::remove_file(d.join("weights.bpk")).unwrap()),
+            |e| matches!(e, ModelLoadError::MissingFile { path } if path.ends_with("weights.bpk")),
+        ),
+        (
+            "manifest not JSON",
+            damaged(t, |d| {
+                std::fs::write(d.join("manifest.json"), "solid x").unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("not JSON")),
+        ),
+        (
+            "foreign JSON",
+            damaged(t, |d| {
+                std::fs::write(d.join("manifest.json"), r#"{"name":"x"}"#).unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("format")),
+        ),
+        (
+            "future version",
+            damaged(t, |d| edit_manifest(d, |m| m["format_version"] = 99.into())),
+            |e| {
+                matches!(
+                    e,
+                    ModelLoadError::UnsupportedVersion {
+                        found: 99,
+                        supported: 1,
+                        ..
+                    }
+                )
+            },
+        ),
+        (
+            "missing field",
+            damaged(t, |d| {
+                edit_manifest(d, |m| {
+                    m.as_object_mut().unwrap().remove("shapes");
+                })
+            }),
+            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("shapes")),
+        ),
+        (
+            "truncated weights",
+            damaged(t, |d| {
+                std::fs::write(d.join("weights.bpk"), &weights[..weights.len() - 9]).unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("truncated")),
+        ),
+        (
+            "flipped byte",
+            damaged(t, |d| {
+                let mut w = weights.clone();
+                let mid = w.len() / 2;
+                w[mid] ^= 1;
+                std::fs::write(d.join("weights.bpk"), w).unwrap();
+            }),
+            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("SHA-256")),
+        ),
+        (
+            "garbage with a matching hash",
+            damaged(t, |d| replace_weights(d, &[7u8; 300])),
+            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("burnpack")),
+        ),
+        (
+            "other width",
+            damaged(t, |d| {
+                edit_manifest(d, |m| m["architecture"]["hidden"] = 16.into())
+            }),
+            |e| matches!(e, ModelLoadError::ArchitectureMismatch { .. }),
+        ),
+        (
+            "fewer shapes than latents",
+            damaged(t, |d| {
+                edit_manifest(d, |m| {
+                    m["shapes"].as_array_mut().unwrap().pop();
+                })
+            }),
+            |e| matches!(e, ModelLoadError::ArchitectureMismatch { detail, .. } if detail.contains("latents")),
+        ),
+        (
+            "invalid architecture",
+            damaged(t, |d| {
+                edit_manifest(d, |m| m["architecture"]["hidden"] = 0.into())
+            }),
+            |e| matches!(e, ModelLoadError::InvalidArchitecture(_)),
+        ),
     ];
     for (name, dir, check) in cases {
         let err = LoadedModel::load(dir.path(), Backend::Flex).expect_err(name);
@@ -233,21 +335,76 @@ mod cohort {
     use aortagen::sdf::generate::{CohortSpecError, MixSpec, Mixture, Weighting, generate_shape};
 
     fn spec(arity: usize, weights: Option<Vec<f64>>) -> MixSpec {
-        MixSpec { arity, weights, weighting: Weighting::Equal }
+        MixSpec {
+            arity,
+            weights,
+            weighting: Weighting::Equal,
+        }
     }
 
     #[test]
     fn each_broken_rule_is_named() {
         type Case = (&'static str, MixSpec, CohortSpecError, &'static str);
         let cases: Vec<Case> = vec![
-            ("arity 1", spec(1, None), CohortSpecError::ArityTooSmall { arity: 1 }, "arity"),
-            ("arity > shapes", spec(4, None), CohortSpecError::ArityTooLarge { arity: 4, shapes: 3 }, "arity"),
-            ("too few weights", spec(3, Some(vec![0.5, 0.5])), CohortSpecError::WeightCount { arity: 3, found: 2 }, "weights"),
-            ("too many weights", spec(2, Some(vec![0.5, 0.25, 0.25])), CohortSpecError::WeightCount { arity: 2, found: 3 }, "weights"),
-            ("negative", spec(2, Some(vec![1.5, -0.5])), CohortSpecError::NegativeWeight { index: 1, value: -0.5 }, "weights"),
-            ("infinite", spec(2, Some(vec![f64::INFINITY, 0.0])), CohortSpecError::NonFiniteWeight { index: 0, value: f64::INFINITY }, "weights"),
-            ("sum 0.9", spec(2, Some(vec![0.5, 0.4])), CohortSpecError::WeightSum { sum: 0.9 }, "weights"),
-            ("sum 1 + 2e-6", spec(2, Some(vec![0.5, 0.500002])), CohortSpecError::WeightSum { sum: 0.5 + 0.500002 }, "weights"),
+            (
+                "arity 1",
+                spec(1, None),
+                CohortSpecError::ArityTooSmall { arity: 1 },
+                "arity",
+            ),
+            (
+                "arity > shapes",
+                spec(4, None),
+                CohortSpecError::ArityTooLarge {
+                    arity: 4,
+                    shapes: 3,
+                },
+                "arity",
+            ),
+            (
+                "too few weights",
+                spec(3, Some(vec![0.5, 0.5])),
+                CohortSpecError::WeightCount { arity: 3, found: 2 },
+                "weights",
+            ),
+            (
+                "too many weights",
+                spec(2, Some(vec![0.5, 0.25, 0.25])),
+                CohortSpecError::WeightCount { arity: 2, found: 3 },
+                "weights",
+            ),
+            (
+                "negative",
+                spec(2, Some(vec![1.5, -0.5])),
+                CohortSpecError::NegativeWeight {
+                    index: 1,
+                    value: -0.5,
+                },
+                "weights",
+            ),
+            (
+                "infinite",
+                spec(2, Some(vec![f64::INFINITY, 0.0])),
+                CohortSpecError::NonFiniteWeight {
+                    index: 0,
+                    value: f64::INFINITY,
+                },
+                "weights",
+            ),
+            (
+                "sum 0.9",
+                spec(2, Some(vec![0.5, 0.4])),
+                CohortSpecError::WeightSum { sum: 0.9 },
+                "weights",
+            ),
+            (
+                "sum 1 + 2e-6",
+                spec(2, Some(vec![0.5, 0.500002])),
+                CohortSpecError::WeightSum {
+                    sum: 0.5 + 0.500002,
+                },
+                "weights",
+            ),
         ];
         for (name, spec, expected, field) in cases {
             let err = spec.validate(SHAPES).expect_err(name);
@@ -256,20 +413,36 @@ mod cohort {
             assert!(err.to_string().contains(field), "{name}: {err}");
         }
         // NaN compares unequal to itself: check the variant and the message.
-        let err = spec(2, Some(vec![f64::NAN, 1.0])).validate(SHAPES).unwrap_err();
-        assert!(matches!(err, CohortSpecError::NonFiniteWeight { index: 0, .. }), "{err:?}");
+        let err = spec(2, Some(vec![f64::NAN, 1.0]))
+            .validate(SHAPES)
+            .unwrap_err();
+        assert!(
+            matches!(err, CohortSpecError::NonFiniteWeight { index: 0, .. }),
+            "{err:?}"
+        );
         assert!(err.to_string().contains("finite"), "{err}");
-        assert_eq!(spec(3, Some(vec![0.2, 0.3, 0.5 + 5e-7])).validate(SHAPES), Ok(()));
+        assert_eq!(
+            spec(3, Some(vec![0.2, 0.3, 0.5 + 5e-7])).validate(SHAPES),
+            Ok(())
+        );
         assert_eq!(spec(2, Some(vec![1.0, 0.0])).validate(SHAPES), Ok(()));
     }
 
     #[test]
     fn mixtures_are_seeded_distinct_and_convex() {
-        let dirichlet = MixSpec { arity: 3, weights: None, weighting: Weighting::Dirichlet };
+        let dirichlet = MixSpec {
+            arity: 3,
+            weights: None,
+            weighting: Weighting::Dirichlet,
+        };
         let mut seen = std::collections::HashSet::new();
         for shape in 0..20 {
             let m = dirichlet.mixture(10, 42, shape).unwrap();
-            assert_eq!(m, dirichlet.mixture(10, 42, shape).unwrap(), "same seed, same shape");
+            assert_eq!(
+                m,
+                dirichlet.mixture(10, 42, shape).unwrap(),
+                "same seed, same shape"
+            );
             let mut idx = m.indices.clone();
             idx.sort_unstable();
             idx.dedup();
@@ -280,7 +453,10 @@ mod cohort {
             seen.insert(format!("{:?}", m.weights));
         }
         assert_eq!(seen.len(), 20, "Dirichlet weights differ between shapes");
-        assert_ne!(dirichlet.mixture(10, 42, 0).unwrap(), dirichlet.mixture(10, 43, 0).unwrap());
+        assert_ne!(
+            dirichlet.mixture(10, 42, 0).unwrap(),
+            dirichlet.mixture(10, 43, 0).unwrap()
+        );
         let equal = spec(4, None).mixture(10, 1, 0).unwrap();
         assert_eq!(equal.weights, [0.25; 4]);
         let given = spec(2, Some(vec![0.3, 0.7])).mixture(10, 1, 0).unwrap();
@@ -290,11 +466,19 @@ mod cohort {
     #[test]
     fn latents_and_transforms_mix_with_the_same_weights() {
         use aortagen::geometry::normalize::UnitBallTransform;
-        let m = Mixture { indices: vec![2, 0], weights: vec![0.25, 0.75] };
+        let m = Mixture {
+            indices: vec![2, 0],
+            weights: vec![0.25, 0.75],
+        };
         let latents = vec![vec![1.0, 0.0], vec![9.0, 9.0], vec![0.0, 4.0]];
         assert_eq!(m.mix_latents(&latents), [0.75, 1.0]);
-        let t = |c: f64, r: f64| UnitBallTransform { centre: [c, 0.0, -c], radius: r };
-        let mixed = m.mix_transforms(&[t(4.0, 10.0), t(0.0, 1.0), t(8.0, 30.0)]).unwrap();
+        let t = |c: f64, r: f64| UnitBallTransform {
+            centre: [c, 0.0, -c],
+            radius: r,
+        };
+        let mixed = m
+            .mix_transforms(&[t(4.0, 10.0), t(0.0, 1.0), t(8.0, 30.0)])
+            .unwrap();
         assert!((mixed.radius - (0.25 * 30.0 + 0.75 * 10.0)).abs() < 1e-12);
         assert!((mixed.centre[0] - 5.0).abs() < 1e-12 && (mixed.centre[2] + 5.0).abs() < 1e-12);
     }
@@ -305,12 +489,20 @@ mod cohort {
         train_tiny(dir.path(), 2);
         let model = load(dir.path());
         let latents = model.latents();
-        let dirichlet = MixSpec { arity: 2, weights: None, weighting: Weighting::Dirichlet };
+        let dirichlet = MixSpec {
+            arity: 2,
+            weights: None,
+            weighting: Weighting::Dirichlet,
+        };
         let shape = generate_shape(&model, &latents, &dirichlet, 7, 1, 20).unwrap();
         assert_eq!(shape.mixture, dirichlet.mixture(SHAPES, 7, 1).unwrap());
         shape.mesh.validate().unwrap();
         let transforms = model.manifest.transforms();
-        let radius: f64 = shape.mixture.indices.iter().zip(&shape.mixture.weights)
+        let radius: f64 = shape
+            .mixture
+            .indices
+            .iter()
+            .zip(&shape.mixture.weights)
             .map(|(&i, &w)| w * transforms[i].radius)
             .sum();
         assert!((shape.transform.radius - radius).abs() < 1e-9);

@@ -62,13 +62,14 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         seed: args.seed,
     };
     let bar = terminal_bar(originals.len() as u64, "shapes");
-    let report = evaluate_model(&model, &originals, &settings, &mut |shape| {
-        match (&bar, shape.chamfer) {
-            (Some(bar), _) => bar.inc(1),
-            (None, Some(cd)) => tracing::info!(shape = %shape.name, chamfer = cd, "reconstructed"),
-            (None, None) => {
-                tracing::warn!(shape = %shape.name, error = ?shape.error, "reconstruction failed");
-            }
+    let report = evaluate_model(&model, &originals, &settings, &mut |shape| match (
+        &bar,
+        shape.chamfer,
+    ) {
+        (Some(bar), _) => bar.inc(1),
+        (None, Some(cd)) => tracing::info!(shape = %shape.name, chamfer = cd, "reconstructed"),
+        (None, None) => {
+            tracing::warn!(shape = %shape.name, error = ?shape.error, "reconstruction failed");
         }
     })?;
     if let Some(bar) = bar {
@@ -107,7 +108,11 @@ fn print_summary(report: &EvaluationReport) {
     if report.failures > 0 {
         println!("  {} shapes gave no surface:", report.failures);
         for shape in report.shapes.iter().filter(|s| s.chamfer.is_none()) {
-            println!("    {}: {}", shape.name, shape.error.as_deref().unwrap_or("?"));
+            println!(
+                "    {}: {}",
+                shape.name,
+                shape.error.as_deref().unwrap_or("?")
+            );
         }
     }
 }

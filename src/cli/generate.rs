@@ -94,7 +94,8 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     for shape in 0..args.count {
         let generated = generate_shape(&model, &latents, &spec, args.seed, shape, args.resolution)
             .with_context(|| format!("shape {shape}"))?;
-        let provenance = Provenance::new(&model, &generated, args.seed, shape, args.resolution, units);
+        let provenance =
+            Provenance::new(&model, &generated, args.seed, shape, args.resolution, units);
         let mesh = match args.units {
             Units::Mm => generated.mesh_in_mesh_units(),
             Units::Unit => generated.mesh.clone(),

@@ -42,7 +42,12 @@ pub fn stream_rng(seed: u64, epoch: u64, batch: u64, stream: u64) -> ChaCha8Rng 
 
 /// The shapes of every batch of `epoch`: a seeded shuffle cut into groups of `batch_shapes`
 /// (the last group may be smaller).
-pub fn epoch_batches(num_shapes: usize, batch_shapes: usize, seed: u64, epoch: u64) -> Vec<Vec<usize>> {
+pub fn epoch_batches(
+    num_shapes: usize,
+    batch_shapes: usize,
+    seed: u64,
+    epoch: u64,
+) -> Vec<Vec<usize>> {
     let mut order: Vec<usize> = (0..num_shapes).collect();
     order.shuffle(&mut stream_rng(seed, epoch, 0, SHUFFLE_STREAM));
     order
@@ -74,7 +79,12 @@ pub fn draw_batch(
     out
 }
 
-fn draw_shape(shape: &PreparedShape, size: &BatchSize, rng: &mut ChaCha8Rng, out: &mut TrainingBatch) {
+fn draw_shape(
+    shape: &PreparedShape,
+    size: &BatchSize,
+    rng: &mut ChaCha8Rng,
+    out: &mut TrainingBatch,
+) {
     let available = shape.points.len();
     let drawn: Vec<usize> = (0..size.surface)
         .map(|_| rng.random_range(0..available))
@@ -84,7 +94,11 @@ fn draw_shape(shape: &PreparedShape, size: &BatchSize, rng: &mut ChaCha8Rng, out
         out.surface_normals.push(shape.normals[i]);
     }
     // Without surface points there is nothing to centre the Gaussians on: all uniform.
-    let gaussian = if drawn.is_empty() { 0 } else { size.eikonal / 2 };
+    let gaussian = if drawn.is_empty() {
+        0
+    } else {
+        size.eikonal / 2
+    };
     for _ in 0..gaussian {
         let i = drawn[rng.random_range(0..drawn.len())];
         let (p, s) = (shape.points[i], shape.sigma[i]);
@@ -145,7 +159,11 @@ mod tests {
     #[test]
     fn batches_depend_only_on_seed_epoch_and_batch() {
         let data = spheres();
-        let size = BatchSize { shapes: 2, surface: 16, eikonal: 12 };
+        let size = BatchSize {
+            shapes: 2,
+            surface: 16,
+            eikonal: 12,
+        };
         let a = draw_batch(&data, &[1, 0], &size, 9, 4, 1);
         assert_eq!(a, draw_batch(&data, &[1, 0], &size, 9, 4, 1));
         assert_ne!(a, draw_batch(&data, &[1, 0], &size, 9, 4, 2));
@@ -157,7 +175,11 @@ mod tests {
     #[test]
     fn points_are_surface_samples_gaussians_near_them_and_uniform_ones() {
         let data = spheres();
-        let size = BatchSize { shapes: 2, surface: 64, eikonal: 400 };
+        let size = BatchSize {
+            shapes: 2,
+            surface: 64,
+            eikonal: 400,
+        };
         let batch = draw_batch(&data, &[0, 1], &size, 1, 0, 0);
         let norm = |p: &[f32; 3]| p.iter().map(|c| c * c).sum::<f32>().sqrt();
         for (s, (r, sigma)) in [(0.3f32, 0.01f32), (0.6, 0.02)].into_iter().enumerate() {
@@ -170,12 +192,23 @@ mod tests {
             let eikonal = &batch.eikonal_points[s * 400..(s + 1) * 400];
             let (gaussian, uniform) = eikonal.split_at(200);
             // Radial offsets of the Gaussian half have spread ≈ σ (well inside 6σ).
-            assert!(gaussian.iter().all(|p| (norm(p) - r).abs() < 6.0 * sigma * 3f32.sqrt()));
-            let spread = (gaussian.iter().map(|p| (norm(p) - r).powi(2)).sum::<f32>() / 200.0).sqrt();
-            assert!(spread > 0.3 * sigma && spread < 3.0 * sigma, "spread {spread}");
+            assert!(
+                gaussian
+                    .iter()
+                    .all(|p| (norm(p) - r).abs() < 6.0 * sigma * 3f32.sqrt())
+            );
+            let spread =
+                (gaussian.iter().map(|p| (norm(p) - r).powi(2)).sum::<f32>() / 200.0).sqrt();
+            assert!(
+                spread > 0.3 * sigma && spread < 3.0 * sigma,
+                "spread {spread}"
+            );
             assert!(uniform.iter().all(|p| p.iter().all(|c| c.abs() <= 1.0)));
             let far = uniform.iter().filter(|p| (norm(p) - r).abs() > 0.1).count();
-            assert!(far > 100, "uniform points fill the cube ({far} of 200 far from the surface)");
+            assert!(
+                far > 100,
+                "uniform points fill the cube ({far} of 200 far from the surface)"
+            );
         }
     }
 }

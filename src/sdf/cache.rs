@@ -23,7 +23,11 @@ pub fn dataset_key(meshes: &[(String, TriMesh)], settings: &SamplingSettings) ->
     let mut h = Sha256::new();
     h.update(MAGIC);
     h.update(LAYOUT_VERSION.to_le_bytes());
-    for v in [settings.points_per_shape as u64, settings.knn_k as u64, settings.seed] {
+    for v in [
+        settings.points_per_shape as u64,
+        settings.knn_k as u64,
+        settings.seed,
+    ] {
         h.update(v.to_le_bytes());
     }
     h.update((meshes.len() as u64).to_le_bytes());
@@ -58,7 +62,9 @@ pub fn prepare_cached(
                 return Ok((ds, key));
             }
             Ok(_) => tracing::warn!(path = %path.display(), "cache does not match; resampling"),
-            Err(e) => tracing::warn!(path = %path.display(), error = %e, "unusable cache; resampling"),
+            Err(e) => {
+                tracing::warn!(path = %path.display(), error = %e, "unusable cache; resampling")
+            }
         }
     }
     let shapes = prepare_shapes(meshes, settings)?;
@@ -83,7 +89,12 @@ pub fn write_cache(path: &Path, ds: &PreparedDataset) -> anyhow::Result<()> {
     body.extend_from_slice(MAGIC);
     body.extend_from_slice(&LAYOUT_VERSION.to_le_bytes());
     let s = &ds.settings;
-    for v in [s.points_per_shape as u64, s.knn_k as u64, s.seed, ds.shapes.len() as u64] {
+    for v in [
+        s.points_per_shape as u64,
+        s.knn_k as u64,
+        s.seed,
+        ds.shapes.len() as u64,
+    ] {
         body.extend_from_slice(&v.to_le_bytes());
     }
     for shape in &ds.shapes {
@@ -118,7 +129,10 @@ pub fn read_cache(path: &Path) -> anyhow::Result<PreparedDataset> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
     ensure!(bytes.len() >= MAGIC.len() + 32, "file too short");
     let (body, digest) = bytes.split_at(bytes.len() - 32);
-    ensure!(Sha256::digest(body).as_slice() == digest, "checksum mismatch");
+    ensure!(
+        Sha256::digest(body).as_slice() == digest,
+        "checksum mismatch"
+    );
     let mut r = Reader { bytes: body, at: 0 };
     ensure!(r.take(MAGIC.len())? == MAGIC, "not a sample cache");
     let version = u32::from_le_bytes(r.array()?);
@@ -197,13 +211,21 @@ mod tests {
     use super::*;
 
     fn tetrahedron(scale: f32) -> TriMesh {
-        let p = [[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]];
+        let p = [
+            [1.0, 1.0, 1.0],
+            [1.0, -1.0, -1.0],
+            [-1.0, 1.0, -1.0],
+            [-1.0, -1.0, 1.0],
+        ];
         let positions = p.iter().map(|v: &[f32; 3]| v.map(|c| c * scale)).collect();
         TriMesh::new(positions, vec![[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
     }
 
     fn inputs() -> (Vec<(String, TriMesh)>, SamplingSettings) {
-        let meshes = vec![("a".into(), tetrahedron(2.0)), ("b".into(), tetrahedron(5.0))];
+        let meshes = vec![
+            ("a".into(), tetrahedron(2.0)),
+            ("b".into(), tetrahedron(5.0)),
+        ];
         let settings = SamplingSettings {
             points_per_shape: 300,
             knn_k: 10,
@@ -252,7 +274,12 @@ mod tests {
         let mut bytes = std::fs::read(&path).unwrap();
         bytes[100] ^= 0x40;
         std::fs::write(&path, &bytes).unwrap();
-        assert!(read_cache(&path).unwrap_err().to_string().contains("checksum"));
+        assert!(
+            read_cache(&path)
+                .unwrap_err()
+                .to_string()
+                .contains("checksum")
+        );
         std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
         assert!(read_cache(&path).is_err());
         let (rebuilt, _) = prepare_cached(&meshes, &settings, Some(dir.path())).unwrap();

@@ -206,8 +206,14 @@ mod tests {
         assert_eq!((s.network.latent_dim, s.network.hidden), (256, 512));
         assert_eq!((s.network.hidden_layers, s.network.skip_layer), (8, 4));
         assert_eq!(s.network.beta, 100.0);
-        assert_eq!((s.training.epochs, s.training.tau, s.training.lambda), (5000, 0.5, 1e-4));
-        assert_eq!((s.sampling.points_per_shape, s.sampling.knn_k), (500_000, 50));
+        assert_eq!(
+            (s.training.epochs, s.training.tau, s.training.lambda),
+            (5000, 0.5, 1e-4)
+        );
+        assert_eq!(
+            (s.sampling.points_per_shape, s.sampling.knn_k),
+            (500_000, 50)
+        );
         assert_eq!((s.training.seed, s.sampling.seed), (4, 4));
         assert_eq!(Preset::Cpu.setup(0).training.validate(), Ok(()));
     }
@@ -224,6 +230,11 @@ mod tests {
             learning_rate: f64::NAN,
             ..t
         };
-        assert!(bad.validate().unwrap_err().to_string().contains("learning_rate"));
+        assert!(
+            bad.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("learning_rate")
+        );
     }
 }

@@ -148,10 +148,18 @@ pub fn evaluate_model(
         on_shape(&result);
         results.push(result);
     }
-    Ok(report(model.manifest.model_id().to_string(), *settings, results))
+    Ok(report(
+        model.manifest.model_id().to_string(),
+        *settings,
+        results,
+    ))
 }
 
-fn report(model_id: String, settings: EvaluationSettings, shapes: Vec<ShapeFidelity>) -> EvaluationReport {
+fn report(
+    model_id: String,
+    settings: EvaluationSettings,
+    shapes: Vec<ShapeFidelity>,
+) -> EvaluationReport {
     let mut cds: Vec<f64> = shapes.iter().filter_map(|s| s.chamfer).collect();
     cds.sort_by(f64::total_cmp);
     let mut floors: Vec<f64> = shapes.iter().map(|s| s.sampling_floor).collect();
@@ -199,7 +207,9 @@ pub fn histogram(sorted: &[f64], bins: usize) -> Option<Histogram> {
     let (lo, hi) = (positive.first()?.log10(), positive.last()?.log10());
     let bins = if hi > lo { bins.max(1) } else { 1 };
     let width = (hi - lo).max(f64::MIN_POSITIVE) / bins as f64;
-    let edges: Vec<f64> = (0..=bins).map(|i| 10f64.powf(lo + i as f64 * width)).collect();
+    let edges: Vec<f64> = (0..=bins)
+        .map(|i| 10f64.powf(lo + i as f64 * width))
+        .collect();
     let mut counts = vec![0usize; bins];
     for v in &positive {
         let bin = ((v.log10() - lo) / width).floor() as usize;

@@ -7,8 +7,8 @@
 //! cohort is reproducible shape by shape whatever its size or the order of the work.
 //! The CLI and the HTTP service share this validation and mixing.
 
-use rand::seq::index;
 use rand::RngExt;
+use rand::seq::index;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -196,9 +196,7 @@ fn mixture_rng(seed: u64, shape: u64) -> ChaCha8Rng {
 
 /// Dirichlet(1,…,1): normalised standard exponentials, −ln(1−U).
 fn dirichlet_ones(rng: &mut ChaCha8Rng, k: usize) -> Vec<f64> {
-    let draws: Vec<f64> = (0..k)
-        .map(|_| -(1.0 - rng.random::<f64>()).ln())
-        .collect();
+    let draws: Vec<f64> = (0..k).map(|_| -(1.0 - rng.random::<f64>()).ln()).collect();
     let sum: f64 = draws.iter().sum();
     if sum > 0.0 {
         draws.into_iter().map(|e| e / sum).collect()

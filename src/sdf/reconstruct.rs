@@ -95,27 +95,35 @@ mod tests {
     use crate::sdf::backend::Backend;
     use crate::sdf::network::SdfNetworkConfig;
 
-    /// The untrained network is ≈ the SDF of a sphere of radius `radius_init` (geometric
-    /// initialisation), which gives an exact reference for the whole latent → mesh path.
+    /// The untrained network is roughly the SDF of a sphere of radius `radius_init`
+    /// (geometric initialisation): a closed, outward mesh whose vertices lie on the field's
+    /// zero level to within the linear-interpolation error of the grid.
     #[test]
-    fn an_untrained_network_reconstructs_its_initial_sphere() {
+    fn an_untrained_network_reconstructs_a_closed_zero_level_near_its_initial_sphere() {
         let device = Backend::default().device(false).unwrap();
-        let config = SdfNetworkConfig::new().with_latent_dim(4).with_hidden(32);
+        let config = SdfNetworkConfig::new().with_latent_dim(4).with_hidden(256);
         let network = config.init(1, &device).unwrap();
         let field = SdfField::new(&network, &[0.0; 4]).unwrap();
-        let mesh = reconstruct_mesh(&field, 24).unwrap();
+        let resolution = 24;
+        let mesh = reconstruct_mesh(&field, resolution).unwrap();
         mesh.validate().unwrap();
         let report = mesh.edge_report();
         assert!(report.is_closed_and_oriented(), "{report:?}");
+        assert!(mesh.signed_volume() > 0.0);
+        let mut f = vec![0.0; mesh.positions.len()];
+        field.eval_batch(&mesh.positions, &mut f, None);
+        let spacing = 2.0 / (resolution - 1) as f32;
+        let worst = f.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        assert!(worst < 0.1 * spacing, "|f| at vertices up to {worst}");
         let r0 = config.radius_init as f32;
         let normals = mesh.normals.as_ref().unwrap();
         for (p, n) in mesh.positions.iter().zip(normals) {
             let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            assert!((r - r0).abs() < 0.05 * r0, "vertex radius {r}");
+            assert!((r - r0).abs() < 0.3 * r0, "vertex radius {r}");
+            assert!((n.iter().map(|c| c * c).sum::<f32>() - 1.0).abs() < 1e-4);
             let radial: f32 = (0..3).map(|c| n[c] * p[c] / r).sum();
-            assert!(radial > 0.95, "normal points outward ({radial})");
+            assert!(radial > 0.8, "normal points outward ({radial})");
         }
-        assert!(mesh.signed_volume() > 0.0);
     }
 
     #[test]
@@ -123,6 +131,9 @@ mod tests {
         let device = Backend::default().device(false).unwrap();
         let network = SdfNetworkConfig::new().with_latent_dim(2).with_hidden(8);
         let field = SdfField::new(&network.init(0, &device).unwrap(), &[0.0; 2]).unwrap();
-        assert_eq!(reconstruct_mesh(&field, 1).unwrap_err(), ReconstructError::Resolution(1));
+        assert_eq!(
+            reconstruct_mesh(&field, 1).unwrap_err(),
+            ReconstructError::Resolution(1)
+        );
     }
 }

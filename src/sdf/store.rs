@@ -169,8 +169,18 @@ pub fn load_decoder(
             reason: format!("unreadable burnpack: {e}"),
         })?;
     let mut problems: Vec<String> = result.errors.iter().map(ToString::to_string).collect();
-    problems.extend(result.missing.iter().map(|(p, _)| format!("missing tensor {p}")));
-    problems.extend(result.unused.iter().map(|p| format!("unexpected tensor {p}")));
+    problems.extend(
+        result
+            .missing
+            .iter()
+            .map(|(p, _)| format!("missing tensor {p}")),
+    );
+    problems.extend(
+        result
+            .unused
+            .iter()
+            .map(|p| format!("unexpected tensor {p}")),
+    );
     if !problems.is_empty() {
         return Err(ModelLoadError::ArchitectureMismatch {
             path,
@@ -187,9 +197,12 @@ pub fn load_optimizer(
     manifest: &ModelManifest,
     fresh: ModuleOptimizer,
 ) -> Result<ModuleOptimizer, ModelLoadError> {
-    let record = manifest.optimizer.as_ref().ok_or(ModelLoadError::MissingFile {
-        path: dir.join(OPTIMIZER_FILE),
-    })?;
+    let record = manifest
+        .optimizer
+        .as_ref()
+        .ok_or(ModelLoadError::MissingFile {
+            path: dir.join(OPTIMIZER_FILE),
+        })?;
     let path = dir.join(&record.file);
     let bytes = read_checked(&path, record)?;
     fresh

@@ -13,10 +13,10 @@ use std::time::Instant;
 
 use anyhow::{Context, bail, ensure};
 
-pub use super::config::{Preset, TrainingConfig, TrainingConfigError, TrainingSetup};
 use super::backend::Backend;
 use super::batch::{draw_batch, epoch_batches};
 use super::cache::prepare_cached;
+pub use super::config::{Preset, TrainingConfig, TrainingConfigError, TrainingSetup};
 use super::data::{DataSource, PreparedDataset, load_source_meshes};
 use super::decoder::SdfAutoDecoder;
 use super::manifest::{
@@ -103,7 +103,15 @@ pub fn train(
         fresh_state(request, &device)?
     };
     let config = manifest.training.clone();
-    let result = run_epochs(dir, &mut manifest, trainer, &data, &config, request, observer)?;
+    let result = run_epochs(
+        dir,
+        &mut manifest,
+        trainer,
+        &data,
+        &config,
+        request,
+        observer,
+    )?;
     Ok(result)
 }
 
@@ -118,7 +126,12 @@ fn fresh_state(
     std::fs::create_dir_all(&request.out_dir)
         .with_context(|| format!("cannot create {}", request.out_dir.display()))?;
     let (data, key) = prepare_cached(&meshes, &setup.sampling, Some(&request.out_dir))?;
-    let decoder = SdfAutoDecoder::new(&setup.network, data.shapes.len(), setup.training.seed, device)?;
+    let decoder = SdfAutoDecoder::new(
+        &setup.network,
+        data.shapes.len(),
+        setup.training.seed,
+        device,
+    )?;
     let trainer = SdfTrainer::new(decoder, setup.training.step_config());
     let manifest = ModelManifest {
         format: MANIFEST_FORMAT.into(),
