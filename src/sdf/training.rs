@@ -126,12 +126,13 @@ fn fresh_state(
     std::fs::create_dir_all(&request.out_dir)
         .with_context(|| format!("cannot create {}", request.out_dir.display()))?;
     let (data, key) = prepare_cached(&meshes, &setup.sampling, Some(&request.out_dir))?;
-    let decoder = SdfAutoDecoder::new(
+    let initial = SdfAutoDecoder::new(
         &setup.network,
         data.shapes.len(),
         setup.training.seed,
         device,
     )?;
+    let decoder = as_leaf_parameters(&initial)?;
     let trainer = SdfTrainer::new(decoder, setup.training.step_config());
     let manifest = ModelManifest {
         format: MANIFEST_FORMAT.into(),
@@ -164,6 +165,25 @@ fn fresh_state(
         optimizer: None,
     };
     Ok((manifest, trainer, data))
+}
+
+/// The same parameter values (and ids) as plain leaf tensors: an initialiser that computes
+/// on the autodiff device (for example a bias calibrated from a forward pass) leaves autodiff
+/// history on its parameters, which the first backward pass would consume. Going through
+/// the checkpoint format gives exactly the tensors a resumed run starts from.
+fn as_leaf_parameters(decoder: &SdfAutoDecoder) -> anyhow::Result<SdfAutoDecoder> {
+    use burn::store::{BurnpackStore, ModuleSnapshot};
+    let mut store = BurnpackStore::from_bytes(None);
+    decoder
+        .save_into(&mut store)
+        .map_err(|e| anyhow::anyhow!("cannot copy the initial weights: {e}"))?;
+    let bytes = store
+        .get_bytes()
+        .map_err(|e| anyhow::anyhow!("cannot copy the initial weights: {e}"))?;
+    let mut copy = decoder.clone();
+    copy.load_from(&mut BurnpackStore::from_bytes(Some(bytes)))
+        .map_err(|e| anyhow::anyhow!("cannot copy the initial weights: {e}"))?;
+    Ok(copy)
 }
 
 fn resume_state(
