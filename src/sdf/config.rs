@@ -10,8 +10,11 @@
 //! (BURN_CPU.md, config c: ≈ 17 000 surface points per second per training step, 9× config a);
 //! 100 000 cached points per shape keep σ_local meaningful at a tenth of the paper's memory;
 //! 2 048 + 2 048 points per shape per step and 8 shapes per batch keep one step near a second.
-//! Epochs and the halving interval are scaled down with the step count; see BENCHMARKS.md
-//! for the measured time per epoch.
+//! Measured (release build, 100 SynthAorta shapes, shared 2-core machine, preliminary):
+//! ≈ 12 900 surface points/s, 16 s per epoch, ≈ 20 s of one-off sampling; 240 epochs ≈ 65 min.
+//! The learning rate halves every 80 epochs (three halvings, as the paper's schedule has
+//! ten over 5000 epochs, scaled to the shorter run). Fidelity per epoch budget has not been
+//! tuned yet: treat these as a starting point.
 
 use serde::{Deserialize, Serialize};
 
@@ -104,12 +107,12 @@ impl Preset {
                 SdfNetworkConfig::new().with_latent_dim(64).with_hidden(128),
                 TrainingConfig {
                     preset: self,
-                    epochs: 400,
+                    epochs: 240,
                     batch_shapes: 8,
                     surface_points: 2048,
                     eikonal_points: 2048,
                     learning_rate: 1e-3,
-                    lr_halving_epochs: 100,
+                    lr_halving_epochs: 80,
                     tau: 0.5,
                     lambda: 1e-4,
                     checkpoint_every: 10,
