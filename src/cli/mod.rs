@@ -2,6 +2,8 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod mesh;
+
 /// Generative models of aortic shapes and synthetic cohorts for in-silico trials.
 #[derive(Debug, Parser)]
 #[command(name = "aortagen", version, about)]
@@ -13,10 +15,15 @@ pub struct Cli {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Report a mesh file's counts, area, volume, closedness and extent; convert formats.
+    Mesh(mesh::MeshArgs),
+}
 
 /// Parses the process arguments and runs the chosen subcommand.
 pub fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Mesh(args) => mesh::run(args),
+    }
 }

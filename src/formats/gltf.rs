@@ -6,7 +6,8 @@ use std::path::Path;
 use gltf::mesh::Mode;
 
 use super::{FormatError, LoadedMesh, MeshFormat, guard};
-use crate::geometry::{TriMesh, cross, dot};
+use crate::geometry::TriMesh;
+use crate::geometry::mesh::{cross, dot};
 
 type Matrix = [[f64; 4]; 4];
 const IDENTITY: Matrix = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
@@ -16,6 +17,9 @@ const IDENTITY: Matrix = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0,
 pub(super) fn read(bytes: &[u8], name: &str, dir: Option<&Path>) -> Result<LoadedMesh, FormatError> {
     let format = if bytes.starts_with(b"glTF") { MeshFormat::Glb } else { MeshFormat::Gltf };
     let malformed = |msg: String| FormatError::malformed(name, format, msg);
+    if format == MeshFormat::Glb {
+        check_glb_header(bytes).map_err(|msg| FormatError::malformed_at(name, format, "GLB header", msg))?;
+    }
     let gltf = guard(|| gltf::Gltf::from_slice(bytes))
         .map_err(malformed)?
         .map_err(|e| malformed(e.to_string()))?;
@@ -37,6 +41,25 @@ pub(super) fn read(bytes: &[u8], name: &str, dir: Option<&Path>) -> Result<Loade
         .and_then(|u| u.as_str())
         .map(str::to_owned);
     Ok(LoadedMesh { mesh, format, units, extras })
+}
+
+/// Size and version checks the `gltf` crate leaves to arithmetic that can overflow.
+fn check_glb_header(bytes: &[u8]) -> Result<(), String> {
+    let word = |at: usize| bytes.get(at..at + 4).map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]));
+    let (Some(version), Some(declared)) = (word(4), word(8)) else {
+        return Err(format!("truncated GLB: {} bytes, the header alone needs 12", bytes.len()));
+    };
+    if version != 2 {
+        return Err(format!("GLB version {version}; only version 2 is supported"));
+    }
+    let declared = declared as usize;
+    if declared > bytes.len() {
+        return Err(format!("truncated GLB: header declares {declared} bytes, file holds {}", bytes.len()));
+    }
+    if declared < 20 {
+        return Err(format!("header declares {declared} bytes, less than a header and one chunk header (20)"));
+    }
+    Ok(())
 }
 
 /// Rejects external buffers when there is no directory, and any that leave it.
@@ -129,9 +152,10 @@ fn append_mesh(
             .ok_or_else(|| err("POSITION is missing or lies outside its buffer".into()))?
             .collect();
         let count = positions.len();
-        let indices: Vec<u32> = match reader.read_indices() {
-            Some(i) => i.into_u32().collect(),
-            None => (0..count as u32).collect(),
+        let indices: Vec<u32> = match (primitive.indices(), reader.read_indices()) {
+            (_, Some(i)) => i.into_u32().collect(),
+            (None, None) => (0..count as u32).collect(),
+            (Some(_), None) => return Err(err("the indices accessor lies outside its buffer".into())),
         };
         if indices.len() % 3 != 0 {
             return Err(err(format!("{} indices is not a multiple of 3", indices.len())));

@@ -36,12 +36,24 @@ type Parsed = (Header, Vec<DefaultElement>, Vec<DefaultElement>);
 
 /// Header, then every element in order (unknown elements are read and dropped).
 fn parse(bytes: &[u8], name: &str) -> Result<Parsed, FormatError> {
+    if !(bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r")) {
+        return Err(FormatError::malformed_at(
+            name,
+            FORMAT,
+            "header line 1",
+            "not a PLY file: it does not start with the magic number 'ply'",
+        ));
+    }
     let parser = Parser::<DefaultElement>::new();
     let mut reader = Reader::new(bytes);
-    let header = parser.read_header(&mut reader).map_err(|e| {
-        let at = e.line().map(|l| format!("header line {l}")).unwrap_or_else(|| "header".into());
-        FormatError::malformed_at(name, FORMAT, at, flatten(&e.to_string()))
-    })?;
+    let header = match parser.read_header(&mut reader) {
+        Ok(header) => header,
+        Err(e) => {
+            let line = e.line().unwrap_or(reader.line());
+            let message = flatten(&e.to_string());
+            return Err(FormatError::malformed_at(name, FORMAT, format!("header line {line}"), message));
+        }
+    };
     let (mut vertices, mut faces) = (None, None);
     for (key, def) in &header.elements {
         let elements = parser.read_payload_for_element(&mut reader, def, &header).map_err(|e| {
@@ -49,8 +61,9 @@ fn parse(bytes: &[u8], name: &str) -> Result<Parsed, FormatError> {
                 (Encoding::Ascii, Some(l)) => format!("line {l} (element '{key}')"),
                 _ => format!("element '{key}'"),
             };
+            let hint = if header.encoding == Encoding::Ascii { "" } else { "; file truncated?" };
             let message = format!(
-                "{} (header declares {} '{key}' elements, {:?} encoding; file truncated?)",
+                "{} (header declares {} '{key}' elements, {:?} encoding{hint})",
                 flatten(&e.to_string()),
                 def.count,
                 header.encoding
@@ -69,7 +82,7 @@ fn parse(bytes: &[u8], name: &str) -> Result<Parsed, FormatError> {
 
 /// The parser's multi-line messages on one line, without its own "Line N:" prefix.
 fn flatten(message: &str) -> String {
-    let one_line = message.replace("\n\t", "; ").replace('\n', "; ");
+    let one_line = message.replace("\n'", "'").replace("\n\t", "; ").replace('\n', "; ");
     match one_line.split_once(": ") {
         Some((prefix, rest)) if prefix.starts_with("Line ") => rest.to_owned(),
         _ => one_line,
