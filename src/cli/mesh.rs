@@ -103,11 +103,18 @@ impl MeshReport {
     pub fn to_text(&self) -> String {
         let unit = self.units.clone().unwrap_or_default();
         let suffix = |power: &str| {
-            if unit.is_empty() { String::new() } else { format!(" {unit}{power}") }
+            if unit.is_empty() {
+                String::new()
+            } else {
+                format!(" {unit}{power}")
+            }
         };
         let v3 = |v: [f64; 3]| format!("[{:.4}, {:.4}, {:.4}]", v[0], v[1], v[2]);
         let volume = match self.enclosed_volume {
-            Some(v) if v < 0.0 => format!("{v:.6}{} (negative: the triangles face inward)", suffix("³")),
+            Some(v) if v < 0.0 => format!(
+                "{v:.6}{} (negative: the triangles face inward)",
+                suffix("³")
+            ),
             Some(v) => format!("{v:.6}{}", suffix("³")),
             None => format!(
                 "not meaningful, the surface is not closed (signed volume {:.6}{})",
@@ -118,11 +125,21 @@ impl MeshReport {
         let lines = [
             format!("file:                 {}", self.file),
             format!("format:               {}", self.format),
-            format!("units:                {}", self.units.as_deref().unwrap_or("not stated in the file")),
+            format!(
+                "units:                {}",
+                self.units.as_deref().unwrap_or("not stated in the file")
+            ),
             format!("vertices:             {}", self.vertices),
             format!("triangles:            {}", self.triangles),
-            format!("vertex normals:       {}", if self.has_normals { "yes" } else { "no" }),
-            format!("surface area:         {:.6}{}", self.surface_area, suffix("²")),
+            format!(
+                "vertex normals:       {}",
+                if self.has_normals { "yes" } else { "no" }
+            ),
+            format!(
+                "surface area:         {:.6}{}",
+                self.surface_area,
+                suffix("²")
+            ),
             format!("enclosed volume:      {volume}"),
             format!(
                 "closed:               {} ({} edges: {} boundary, {} non-manifold, {} inconsistently oriented)",
@@ -149,7 +166,10 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     let mut written = None;
     if let Some(out) = &args.convert {
         let format = MeshFormat::from_path(out)?;
-        let source = args.file.file_name().map_or(file.clone(), |n| n.to_string_lossy().into_owned());
+        let source = args
+            .file
+            .file_name()
+            .map_or(file.clone(), |n| n.to_string_lossy().into_owned());
         let meta = conversion_metadata(&source, &loaded, args.units.clone());
         let bytes = write_mesh(&loaded.mesh, format, &meta)?;
         std::fs::write(out, &bytes).with_context(|| format!("cannot write {}", out.display()))?;
@@ -158,7 +178,8 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     if args.json {
         let mut value = serde_json::to_value(&report)?;
         if let Some((path, format, bytes)) = &written {
-            value["converted_to"] = serde_json::json!({ "file": path, "format": format, "bytes": bytes });
+            value["converted_to"] =
+                serde_json::json!({ "file": path, "format": format, "bytes": bytes });
         }
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
@@ -173,7 +194,9 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
 /// Metadata for a converted file: the stated units and where the mesh came from
 /// (carrying over any provenance the input recorded).
 fn conversion_metadata(file: &str, loaded: &LoadedMesh, units: Option<String>) -> MeshMetadata {
-    let units = units.or_else(|| loaded.units.clone()).unwrap_or_else(|| "unknown".to_owned());
+    let units = units
+        .or_else(|| loaded.units.clone())
+        .unwrap_or_else(|| "unknown".to_owned());
     let mut extras = serde_json::json!({
         "converted_from": file,
         "source_format": loaded.format,
