@@ -212,7 +212,7 @@ impl Collector<'_> {
                 (None, None) => (0..count as u32).collect(),
                 (Some(_), None) => return Err(err("the indices accessor lies outside its buffer")),
             };
-            if indices.len() % 3 != 0 {
+            if !indices.len().is_multiple_of(3) {
                 return Err(err(&format!(
                     "{} indices is not a multiple of 3",
                     indices.len()

@@ -49,7 +49,7 @@ fn merge(models: &[tobj::Model], name: &str) -> Result<TriMesh, FormatError> {
     let welding = models.len() > 1;
     for model in models {
         let m = &model.mesh;
-        if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 {
+        if !m.positions.len().is_multiple_of(3) || !m.indices.len().is_multiple_of(3) {
             return Err(FormatError::malformed(
                 name,
                 MeshFormat::Obj,

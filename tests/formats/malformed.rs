@@ -103,7 +103,7 @@ fn malformed_cases() -> Vec<Case> {
         case(
             "obj truncated",
             Obj,
-            obj[..obj.find("v 1 0 0").unwrap() + 5].as_bytes().to_vec(),
+            obj.as_bytes()[..obj.find("v 1 0 0").unwrap() + 5].to_vec(),
             &["line 8", "position parse error"],
         ),
         case(
@@ -239,7 +239,7 @@ fn malformed_cases() -> Vec<Case> {
         case(
             "gltf truncated",
             Gltf,
-            gltf[..gltf.len() / 2].as_bytes().to_vec(),
+            gltf.as_bytes()[..gltf.len() / 2].to_vec(),
             &["glTF parse error", "EOF"],
         ),
         case("gltf garbage", Gltf, garbage(300, 5), &["glTF parse error"]),
