@@ -3,7 +3,7 @@
 
 /// The coordinate frame recorded with every written mesh.
 pub const COORDINATE_FRAME_NOTE: &str = "right-handed x, y, z: the source data's own frame \
-    (millimetres as scanned), or the model's unit-ball frame when the unit is 'unit'";
+    and origin, or the model's unit-ball frame (centred, radius 1) when the unit is 'unit'";
 
 /// The sign convention recorded with every written mesh.
 pub const SIGN_CONVENTION_NOTE: &str = "signed distance f < 0 inside, f > 0 outside; \
