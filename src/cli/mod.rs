@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 pub mod evaluate;
 pub mod generate;
+pub mod mesh;
 pub mod progress;
 pub mod render;
 pub mod synth;
@@ -31,6 +32,8 @@ pub enum Command {
     Evaluate(evaluate::EvaluateArgs),
     /// Generate shapes as convex combinations of learned latents.
     Generate(generate::GenerateArgs),
+    /// Report a mesh file's counts, area, volume, closedness and extent; convert formats.
+    Mesh(mesh::MeshArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -42,5 +45,6 @@ pub fn run() -> anyhow::Result<()> {
         Command::Train(args) => train::run(args),
         Command::Evaluate(args) => evaluate::run(args),
         Command::Generate(args) => generate::run(args),
+        Command::Mesh(args) => mesh::run(args),
     }
 }
