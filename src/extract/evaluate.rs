@@ -5,6 +5,9 @@ use crate::geometry::TriMesh;
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
+/// A batch of points with the slice their values go to.
+type PointsAndValues<'a> = (&'a [[f32; 3]], &'a mut [f32]);
+
 /// Sends points to a field in batches and keeps the time spent inside it.
 pub(crate) struct Evaluator<'a> {
     field: &'a dyn ScalarField,
@@ -59,9 +62,8 @@ impl<'a> Evaluator<'a> {
         let mut grads = vec![[0.0f32; 3]; points.len()];
         let start = Instant::now();
         let (field, batch) = (self.field, self.options.batch_size);
-        let run = |((p, v), g): ((&[[f32; 3]], &mut [f32]), &mut [[f32; 3]])| {
-            field.eval_batch(p, v, Some(g))
-        };
+        let run =
+            |((p, v), g): (PointsAndValues<'_>, &mut [[f32; 3]])| field.eval_batch(p, v, Some(g));
         match self.options.parallelism {
             Parallelism::InsideField => points
                 .chunks(batch)
@@ -95,7 +97,7 @@ pub(crate) fn finish(
     if options.gradient_normals && !mesh.positions.is_empty() {
         let mut normals = evaluator.normals(&mesh.positions);
         evaluations = mesh.positions.len() as u64;
-        if normals.iter().any(|n| *n == [0.0; 3]) {
+        if normals.contains(&[0.0; 3]) {
             let faces = mesh.compute_vertex_normals();
             for (n, f) in normals.iter_mut().zip(faces) {
                 if *n == [0.0; 3] {

@@ -110,7 +110,7 @@ fn stitch(slabs: Vec<Slab>) -> TriMesh {
     );
     let mut normals: Vec<[f32; 3]> = slabs.into_iter().flat_map(|s| s.normals).collect();
     // A vanishing gradient (flat spot of the field) gets the surface's own normal instead.
-    if normals.iter().any(|n| *n == [0.0; 3]) {
+    if normals.contains(&[0.0; 3]) {
         let from_faces = mesh.compute_vertex_normals();
         for (n, f) in normals.iter_mut().zip(from_faces) {
             if *n == [0.0; 3] {
@@ -127,18 +127,45 @@ impl Dense<'_> {
         self.values[i + self.r * (j + self.r * k)]
     }
 
-    /// 4-bit inside codes of the squares of sample plane `k` (bit dx | dy << 1).
-    fn plane_codes(&self, k: usize, out: &mut [u8]) {
+    /// 4-bit inside codes of the squares of sample plane `k` (bit dx | dy << 1); `bits` is
+    /// scratch space for one plane. Written as straight slice loops so they vectorise.
+    fn plane_codes(&self, k: usize, bits: &mut [u8], out: &mut [u8]) {
         let r = self.r;
         let plane = &self.values[r * r * k..r * r * (k + 1)];
-        for j in 0..r - 1 {
-            let (row0, row1) = (&plane[j * r..(j + 1) * r], &plane[(j + 1) * r..(j + 2) * r]);
-            let out = &mut out[j * (r - 1)..(j + 1) * (r - 1)];
+        for (b, v) in bits.iter_mut().zip(plane) {
+            *b = u8::from(*v < self.iso);
+        }
+        for (j, out) in out.chunks_exact_mut(r - 1).enumerate() {
+            let (row0, row1) = (&bits[j * r..(j + 1) * r], &bits[(j + 1) * r..(j + 2) * r]);
+            let (a0, a1, b0, b1) = (&row0[..r - 1], &row0[1..], &row1[..r - 1], &row1[1..]);
             for i in 0..r - 1 {
-                out[i] = u8::from(row0[i] < self.iso)
-                    | u8::from(row0[i + 1] < self.iso) << 1
-                    | u8::from(row1[i] < self.iso) << 2
-                    | u8::from(row1[i + 1] < self.iso) << 3;
+                out[i] = a0[i] | a1[i] << 1 | b0[i] << 2 | b1[i] << 3;
+            }
+        }
+    }
+
+    /// Calls `f(i, case)` for every cell of a row whose case is not empty or full, skipping
+    /// eight uniform cells at a time.
+    fn scan_row(lo: &[u8], hi: &[u8], mut f: impl FnMut(usize, u8)) {
+        const FULL: u64 = 0x0f0f_0f0f_0f0f_0f0f;
+        let mut i = 0;
+        for (l8, h8) in lo.chunks_exact(8).zip(hi.chunks_exact(8)) {
+            let l = u64::from_le_bytes(l8.try_into().expect("8 bytes"));
+            let h = u64::from_le_bytes(h8.try_into().expect("8 bytes"));
+            if !((l | h) == 0 || (l == FULL && h == FULL)) {
+                for n in 0..8 {
+                    let case = l8[n] | h8[n] << 4;
+                    if case != 0 && case != 0xff {
+                        f(i + n, case);
+                    }
+                }
+            }
+            i += 8;
+        }
+        for n in i..lo.len() {
+            let case = lo[n] | hi[n] << 4;
+            if case != 0 && case != 0xff {
+                f(n, case);
             }
         }
     }
@@ -156,18 +183,20 @@ impl Dense<'_> {
             EdgeMap::new(2 * r * r),
             EdgeMap::new(r * r),
         ];
+        let mut bits = vec![0u8; r * r];
         let mut lo = vec![0u8; (r - 1) * (r - 1)];
         let mut hi = lo.clone();
-        self.plane_codes(k0, &mut lo);
+        self.plane_codes(k0, &mut bits, &mut lo);
         for k in k0..k1 {
-            self.plane_codes(k + 1, &mut hi);
-            for j in 0..r - 1 {
-                for i in 0..r - 1 {
-                    let case = lo[j * (r - 1) + i] | hi[j * (r - 1) + i] << 4;
-                    if case != 0 && case != 0xff {
-                        self.cell([i, j, k], case, k == k0 && k0 > 0, &mut maps, &mut out);
-                    }
-                }
+            self.plane_codes(k + 1, &mut bits, &mut hi);
+            for (j, (lo, hi)) in lo
+                .chunks_exact(r - 1)
+                .zip(hi.chunks_exact(r - 1))
+                .enumerate()
+            {
+                Self::scan_row(lo, hi, |i, case| {
+                    self.cell([i, j, k], case, k == k0 && k0 > 0, &mut maps, &mut out)
+                });
             }
             std::mem::swap(&mut lo, &mut hi);
             let [below, above, vertical] = &mut maps;

@@ -226,7 +226,7 @@ fn face_segments(case: u8, face: usize, join_inside: bool) -> Vec<(u8, u8)> {
     };
     let axis = face / 2;
     let mut normal = [0.0; 3];
-    normal[axis] = if face % 2 == 0 { -1.0 } else { 1.0 };
+    normal[axis] = if face.is_multiple_of(2) { -1.0 } else { 1.0 };
     cuts.into_iter()
         .map(|(i, j, group)| {
             let (p, q) = (edge_mid(edge(i)), edge_mid(edge(j)));
@@ -346,18 +346,48 @@ mod tests {
     }
 
     #[test]
-    fn table_statistics() {
+    fn triangles_meet_only_along_face_segments_or_private_diagonals() {
         let t = &*TABLE;
-        let max = (0..ENTRIES)
-            .map(|i| t.offsets[i + 1] - t.offsets[i])
-            .max()
-            .unwrap();
-        let centres = t.centres.iter().filter(|c| !c.is_empty()).count();
-        println!("max triangles {max}, centroid entries {centres}");
-        let maxloop = (0..ENTRIES)
-            .flat_map(|i| loops((i & 0xff) as u8, (i >> 8) as u8))
-            .map(|l| l.len())
-            .max();
-        println!("max loop {maxloop:?}");
+        for index in 0..ENTRIES {
+            let (case, decisions) = ((index & 0xff) as u8, (index >> 8) as u8);
+            let mut directed = std::collections::HashMap::new();
+            for tri in t.triangles(case, decisions) {
+                for k in 0..3 {
+                    *directed.entry((tri[k], tri[(k + 1) % 3])).or_insert(0) += 1;
+                }
+            }
+            for (&(a, b), &n) in &directed {
+                let back = directed.get(&(b, a)).copied().unwrap_or(0);
+                let on_face = a != CENTRE_SLOT && b != CENTRE_SLOT && share_face(a, b);
+                if on_face {
+                    // A segment on the cell's boundary: used once, by this cell alone.
+                    assert_eq!(
+                        (n, back),
+                        (1, 0),
+                        "case {case:#010b} dec {decisions:06b} edge {a}-{b}"
+                    );
+                } else {
+                    assert_eq!(
+                        (n, back),
+                        (1, 1),
+                        "case {case:#010b} dec {decisions:06b} edge {a}-{b}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_cut_off_inside_corner_faces_away_from_it() {
+        // Corner 0 inside: the normal of its triangle points along +(1, 1, 1).
+        let tris = TABLE.triangles(0b0000_0001, 0);
+        assert_eq!(tris.len(), 1);
+        let [a, b, c] = tris[0].map(edge_mid);
+        let n = cross(sub(b, a), sub(c, a));
+        assert!(n.iter().all(|&x| x > 0.0), "{n:?}");
+        // The complement (all but corner 0 inside) is the same triangle reversed.
+        let flipped = TABLE.triangles(0b1111_1110, 0);
+        let [a, b, c] = flipped[0].map(edge_mid);
+        assert!(cross(sub(b, a), sub(c, a)).iter().all(|&x| x < 0.0));
     }
 }

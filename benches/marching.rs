@@ -1,0 +1,123 @@
+//! Marching-cubes and extraction benchmarks.
+//!
+//! Run with `cargo bench --bench marching [-- mc|extract]`. Prints the median of several runs of
+//! 1. dense marching cubes on R³ grids (R = 256, 128) of the reference scene of
+//!    peers/bench_marching_cubes.py (torus ∪ two spheres ∪ ellipsoid) and of a sphere;
+//! 2. sparse vs dense extraction from the analytic scene as a field at R = 256
+//!    (evaluations and time), and the sparse path alone at R = 512 with peak memory.
+
+use aortagen::extract::analytic::Shape;
+use aortagen::extract::{ExtractOptions, Extraction, extract_dense, extract_surface};
+use aortagen::geometry::marching_cubes::{Grid, marching_cubes};
+use std::time::{Duration, Instant};
+
+/// Median wall time of `runs` calls after `warmup` untimed ones, and the last result.
+fn median<T>(warmup: usize, runs: usize, mut f: impl FnMut() -> T) -> (Duration, T) {
+    for _ in 0..warmup {
+        std::hint::black_box(f());
+    }
+    let mut times = Vec::with_capacity(runs);
+    let mut last = None;
+    for _ in 0..runs {
+        let start = Instant::now();
+        last = Some(f());
+        times.push(start.elapsed());
+    }
+    times.sort();
+    (times[runs / 2], last.expect("at least one run"))
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Peak resident memory of this process so far (Linux), in MiB.
+fn peak_rss_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
+}
+
+fn dense_marching_cubes() {
+    let sphere = Shape::Sphere {
+        centre: [0.0; 3],
+        radius: 0.5,
+    };
+    for (name, shape) in [("scene", Shape::benchmark_scene()), ("sphere", sphere)] {
+        for (resolution, runs) in [(256, 15), (128, 30)] {
+            let grid = Grid::new(resolution);
+            let values: Vec<f32> = grid
+                .points()
+                .map(|p| shape.value_and_gradient(p).0)
+                .collect();
+            let (t, mesh) = median(3, runs, || marching_cubes(&grid, &values, 0.0));
+            println!(
+                "marching_cubes {name} {resolution}^3: median {:.1} ms of {runs}; {} triangles, {} vertices, closed {}",
+                ms(t),
+                mesh.triangle_count(),
+                mesh.vertex_count(),
+                mesh.edge_report().is_closed_and_oriented()
+            );
+        }
+    }
+}
+
+fn report(label: &str, t: Duration, out: &Extraction) {
+    println!(
+        "{label}: median {:.1} ms (evaluation {:.1} ms, meshing {:.1} ms); evaluations {} \
+         (centres {}, samples {}, normals {}); {} triangles; kept blocks {}",
+        ms(t),
+        ms(out.timings.evaluation),
+        ms(out.timings.meshing),
+        out.evaluations.total(),
+        out.evaluations.block_centres,
+        out.evaluations.samples,
+        out.evaluations.normals,
+        out.mesh.triangle_count(),
+        out.kept_blocks
+    );
+}
+
+fn sparse_vs_dense() {
+    let scene = Shape::benchmark_scene();
+    let options = ExtractOptions::default();
+    let (t, out) = median(1, 5, || {
+        extract_surface(&scene, 512, &options).expect("valid options")
+    });
+    report("extract sparse R=512", t, &out);
+    if let Some(peak) = peak_rss_mib() {
+        println!("peak RSS after sparse R=512: {peak:.0} MiB");
+    }
+    let (ts, sparse) = median(1, 7, || {
+        extract_surface(&scene, 256, &options).expect("valid options")
+    });
+    report("extract sparse R=256", ts, &sparse);
+    let (td, dense) = median(1, 7, || {
+        extract_dense(&scene, 256, &options).expect("valid options")
+    });
+    report("extract dense  R=256", td, &dense);
+    println!(
+        "sparse/dense at R=256: {:.2}x fewer evaluations, {:.2}x faster; same triangles: {}",
+        dense.evaluations.total() as f64 / sparse.evaluations.total() as f64,
+        td.as_secs_f64() / ts.as_secs_f64(),
+        dense.mesh.triangle_count() == sparse.mesh.triangle_count()
+    );
+}
+
+fn main() {
+    // `cargo bench --bench marching -- mc` runs only the sections whose name matches.
+    let filters: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
+    let wanted =
+        |name: &str| filters.is_empty() || filters.iter().any(|f| name.contains(f.as_str()));
+    println!("threads: {}", rayon::current_num_threads());
+    if wanted("mc") {
+        dense_marching_cubes();
+    }
+    if wanted("extract") {
+        sparse_vs_dense();
+    }
+}
