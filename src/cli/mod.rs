@@ -2,8 +2,13 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod evaluate;
+pub mod generate;
+pub mod mesh;
+pub mod progress;
 pub mod render;
 pub mod synth;
+pub mod train;
 
 /// Generative models of aortic shapes and synthetic cohorts for in-silico trials.
 #[derive(Debug, Parser)]
@@ -21,6 +26,14 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Render meshes side by side into a PNG.
     Render(render::RenderArgs),
+    /// Train a neural SDF auto-decoder on a mesh directory or parametric roots.
+    Train(train::TrainArgs),
+    /// Reconstruct every training shape and report its Chamfer distance.
+    Evaluate(evaluate::EvaluateArgs),
+    /// Generate shapes as convex combinations of learned latents.
+    Generate(generate::GenerateArgs),
+    /// Report a mesh file's counts, area, volume, closedness and extent; convert formats.
+    Mesh(mesh::MeshArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -29,5 +42,9 @@ pub fn run() -> anyhow::Result<()> {
     match cli.command {
         Command::Synth(args) => synth::run(args),
         Command::Render(args) => render::run(args),
+        Command::Train(args) => train::run(args),
+        Command::Evaluate(args) => evaluate::run(args),
+        Command::Generate(args) => generate::run(args),
+        Command::Mesh(args) => mesh::run(args),
     }
 }

@@ -1,10 +1,15 @@
 //! Pure geometry: the triangle mesh type, normalisation, surface sampling, marching cubes
 //! and the Chamfer distance. No I/O, no model, no async.
 
+pub mod chamfer;
 pub mod marching_cubes;
 pub(crate) mod mc_cell;
 pub(crate) mod mc_dense;
 pub(crate) mod mc_tables;
 pub mod mesh;
+pub mod normalize;
+pub mod sampling;
+#[cfg(test)]
+pub(crate) mod test_shapes;
 
 pub use mesh::{Aabb, EdgeReport, MeshError, TriMesh};

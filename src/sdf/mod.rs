@@ -1,1 +1,38 @@
-//! The neural signed-distance auto-decoder (burn): model, loss, training and inference.
+//! The neural signed-distance auto-decoder (burn): model, loss, training step and inference.
+//!
+//! - [`backend`]: the only place a compute backend / device is chosen.
+//! - [`network`]: the DeepSDF/IGR MLP and its explicit input gradient ∇ₓf.
+//! - [`decoder`]: network + per-shape latent table.
+//! - [`loss`]: the IGR loss over a [`TrainingBatch`].
+//! - [`step`]: one Adam step ([`SdfTrainer`]).
+//! - [`field`]: fast evaluation of f and ∇f for one latent over many points.
+//! - [`data`], [`cache`], [`batch`]: training shapes, their one-off samples, reproducible batches.
+//! - [`config`], [`training`], [`manifest`], [`store`]: the training loop and saved models.
+//! - [`reconstruct`], [`evaluation`], [`generate`]: meshes, fidelity and new shapes from latents.
+//!
+//! Sign convention: f < 0 inside, f > 0 outside (forced by the loss with outward normals).
+
+pub mod backend;
+pub mod decoder;
+pub mod field;
+pub mod loss;
+pub mod network;
+pub mod step;
+
+pub use backend::{Backend, BackendError};
+pub use decoder::SdfAutoDecoder;
+pub use field::SdfField;
+pub use loss::{BatchError, IgrLossConfig, LossTerms, TrainingBatch, igr_loss};
+pub use network::{LatentOffsets, NetworkConfigError, SdfNetwork, SdfNetworkConfig, SdfOutput};
+pub use step::{SdfTrainer, TrainStepConfig, TrainStepOutput};
+
+pub mod batch;
+pub mod cache;
+pub mod config;
+pub mod data;
+pub mod evaluation;
+pub mod generate;
+pub mod manifest;
+pub mod reconstruct;
+pub mod store;
+pub mod training;

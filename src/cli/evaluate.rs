@@ -1,0 +1,118 @@
+//! `aortagen evaluate`: reconstruction fidelity of every training shape (Chamfer distance).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, ensure};
+
+use super::progress::{init_logging, terminal_bar};
+use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
+use crate::sdf::backend::Backend;
+use crate::sdf::data::{DataSource, load_source_meshes};
+use crate::sdf::evaluation::{CHAMFER_UNITS, EvaluationReport, EvaluationSettings, evaluate_model};
+use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
+use crate::sdf::store::LoadedModel;
+
+/// Reconstruct each training shape from its latent and compare it with the original.
+#[derive(Debug, clap::Args)]
+pub struct EvaluateArgs {
+    /// Model directory written by `aortagen train`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Directory of the original meshes (default: the training source in the manifest).
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    /// Grid samples per axis over [-1,1]³.
+    #[arg(long, default_value_t = DEFAULT_RESOLUTION)]
+    pub resolution: usize,
+    /// Points sampled on each surface for the Chamfer distance.
+    #[arg(long, default_value_t = DEFAULT_CHAMFER_POINTS)]
+    pub points: usize,
+    /// Seed of the Chamfer samplings.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Also write the full report (per-shape CD, quantiles, histogram, floor) as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Compute backend.
+    #[arg(long, default_value = "flex", value_parser = parse_backend)]
+    pub backend: Backend,
+}
+
+fn parse_backend(s: &str) -> Result<Backend, String> {
+    s.parse::<Backend>().map_err(|e| e.to_string())
+}
+
+/// Runs `aortagen evaluate`.
+pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
+    init_logging();
+    ensure!(args.resolution >= 2, "--resolution must be at least 2");
+    ensure!(args.points >= 1, "--points must be at least 1");
+    let model = LoadedModel::load(&args.model, args.backend)?;
+    let source = match &args.data {
+        Some(path) => DataSource::Directory { path: path.clone() },
+        None => model.manifest.data.source.clone(),
+    };
+    let originals: Vec<_> = load_source_meshes(&source)?
+        .into_iter()
+        .map(|(_, mesh)| mesh)
+        .collect();
+    let settings = EvaluationSettings {
+        resolution: args.resolution,
+        chamfer_points: args.points,
+        seed: args.seed,
+    };
+    let bar = terminal_bar(originals.len() as u64, "shapes");
+    let report = evaluate_model(&model, &originals, &settings, &mut |shape| match (
+        &bar,
+        shape.chamfer,
+    ) {
+        (Some(bar), _) => bar.inc(1),
+        (None, Some(cd)) => tracing::info!(shape = %shape.name, chamfer = cd, "reconstructed"),
+        (None, None) => {
+            tracing::warn!(shape = %shape.name, error = ?shape.error, "reconstruction failed");
+        }
+    })?;
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    print_summary(&report);
+    if let Some(path) = &args.json {
+        let json = serde_json::to_vec_pretty(&report)?;
+        std::fs::write(path, json).with_context(|| format!("cannot write {}", path.display()))?;
+        println!("report written to {}", path.display());
+    }
+    Ok(())
+}
+
+fn print_summary(report: &EvaluationReport) {
+    let s = &report.settings;
+    println!(
+        "model {}: {} shapes, grid {}³, {} points per surface",
+        report.model_id,
+        report.shapes.len(),
+        s.resolution,
+        s.chamfer_points
+    );
+    println!("Chamfer distance in {CHAMFER_UNITS}:");
+    match &report.summary {
+        Some(q) => println!(
+            "  median {:.3e}  mean {:.3e}  q25 {:.3e}  q75 {:.3e}  q90 {:.3e}  min {:.3e}  max {:.3e}",
+            q.median, q.mean, q.q25, q.q75, q.q90, q.min, q.max
+        ),
+        None => println!("  no shape could be reconstructed"),
+    }
+    println!(
+        "  sampling floor (two samplings of the same original, median): {:.3e}",
+        report.sampling_floor_median
+    );
+    if report.failures > 0 {
+        println!("  {} shapes gave no surface:", report.failures);
+        for shape in report.shapes.iter().filter(|s| s.chamfer.is_none()) {
+            println!(
+                "    {}: {}",
+                shape.name,
+                shape.error.as_deref().unwrap_or("?")
+            );
+        }
+    }
+}

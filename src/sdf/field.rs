@@ -1,0 +1,143 @@
+//! Inference: f and ∇ₓf of one shape (one latent) at many points.
+//!
+//! The latent's contribution to layer 0 and to the skip layer (`z·W_z + b`) is computed once
+//! when the field is built; each evaluation then only multiplies the points' own activations.
+//! Points are processed in chunks so memory stays bounded for dense grids.
+
+use burn::module::Module;
+use burn::tensor::{Tensor, TensorData};
+
+use super::network::{LatentOffsets, SdfNetwork};
+
+/// Points per network evaluation: large enough for efficient matrix products, small enough
+/// that the widest configuration (H = 512) stays near 100 MB of activations.
+pub const DEFAULT_CHUNK_POINTS: usize = 32_768;
+
+/// Why a field cannot be built or evaluated.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FieldError {
+    /// The latent's length differs from the network's d.
+    #[error("latent has {len} values but the network expects d = {expected}")]
+    LatentLength {
+        /// Given length.
+        len: usize,
+        /// The network's latent size.
+        expected: usize,
+    },
+    /// Output buffers do not match the number of points.
+    #[error("{what} has {len} entries for {points} points")]
+    BufferLength {
+        /// Which buffer.
+        what: &'static str,
+        /// Its length.
+        len: usize,
+        /// Number of points.
+        points: usize,
+    },
+}
+
+/// The SDF of one shape: a network (without autodiff) and its precomputed latent offsets.
+#[derive(Debug, Clone)]
+pub struct SdfField {
+    network: SdfNetwork,
+    offsets: LatentOffsets,
+    chunk_points: usize,
+}
+
+impl SdfField {
+    /// The field of latent `z` (length d). The network is detached from autodiff if needed.
+    pub fn new(network: &SdfNetwork, latent: &[f32]) -> Result<Self, FieldError> {
+        let expected = network.latent_dim;
+        if latent.len() != expected {
+            return Err(FieldError::LatentLength {
+                len: latent.len(),
+                expected,
+            });
+        }
+        let network = network.valid();
+        let z = Tensor::<2>::from_data(
+            TensorData::new(latent.to_vec(), [1, expected]),
+            (&network.device(), network.dtype()),
+        );
+        let offsets = network.latent_offsets(z);
+        Ok(Self {
+            network,
+            offsets,
+            chunk_points: DEFAULT_CHUNK_POINTS,
+        })
+    }
+
+    /// Sets the number of points per network call (at least 1).
+    pub fn with_chunk_points(mut self, chunk_points: usize) -> Self {
+        self.chunk_points = chunk_points.max(1);
+        self
+    }
+
+    /// Evaluates f (and ∇ₓf when `gradients` is given) at `points`.
+    pub fn try_eval_batch(
+        &self,
+        points: &[[f32; 3]],
+        values: &mut [f32],
+        mut gradients: Option<&mut [[f32; 3]]>,
+    ) -> Result<(), FieldError> {
+        let n = points.len();
+        if values.len() != n {
+            return Err(FieldError::BufferLength {
+                what: "values",
+                len: values.len(),
+                points: n,
+            });
+        }
+        if let Some(g) = gradients.as_deref()
+            && g.len() != n
+        {
+            return Err(FieldError::BufferLength {
+                what: "gradients",
+                len: g.len(),
+                points: n,
+            });
+        }
+        let (device, dtype) = (self.network.device(), self.network.dtype());
+        for (c, chunk) in points.chunks(self.chunk_points).enumerate() {
+            let start = c * self.chunk_points;
+            let flat: Vec<f32> = chunk.iter().flatten().copied().collect();
+            let x =
+                Tensor::<2>::from_data(TensorData::new(flat, [chunk.len(), 3]), (&device, dtype));
+            let out = self.network.evaluate(&self.offsets, x, gradients.is_some());
+            let f = to_f32(out.values);
+            values[start..start + chunk.len()].copy_from_slice(&f);
+            if let (Some(dst), Some(g)) = (gradients.as_deref_mut(), out.gradients) {
+                let g = to_f32(g);
+                for (d, s) in dst[start..start + chunk.len()]
+                    .iter_mut()
+                    .zip(g.chunks_exact(3))
+                {
+                    *d = [s[0], s[1], s[2]];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Self::try_eval_batch`] for callers that size the buffers themselves.
+    ///
+    /// # Panics
+    /// When `values` (or `gradients`) does not have one entry per point.
+    pub fn eval_batch(
+        &self,
+        points: &[[f32; 3]],
+        values: &mut [f32],
+        gradients: Option<&mut [[f32; 3]]>,
+    ) {
+        if let Err(e) = self.try_eval_batch(points, values, gradients) {
+            panic!("SdfField::eval_batch: {e}");
+        }
+    }
+}
+
+fn to_f32(t: Tensor<2>) -> Vec<f32> {
+    t.into_data()
+        .convert::<f32>()
+        .into_vec::<f32>()
+        .expect("converted to f32")
+}

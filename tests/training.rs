@@ -1,0 +1,516 @@
+//! Training end to end on tiny settings: train → save → load → evaluate, bit-exact resume,
+//! every way a model directory can be broken, and the cohort-mixing rules.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use aortagen::geometry::normalize::normalize_to_unit_ball;
+use aortagen::sdf::backend::Backend;
+use aortagen::sdf::data::{DataSource, load_source_meshes};
+use aortagen::sdf::decoder::SdfAutoDecoder;
+use aortagen::sdf::evaluation::{EvaluationSettings, evaluate_model};
+use aortagen::sdf::store::{LoadedModel, ModelLoadError};
+use aortagen::sdf::training::{
+    Preset, Silent, StepReport, TrainingObserver, TrainingOutcome, TrainingRequest, TrainingSetup,
+    train,
+};
+
+const SHAPES: usize = 3;
+
+/// A network and sampling small enough for a debug build (well under a second per run).
+fn tiny_setup(epochs: u64) -> TrainingSetup {
+    let mut setup = Preset::Cpu.setup(11);
+    setup.network = setup.network.with_latent_dim(8).with_hidden(32);
+    setup.sampling.points_per_shape = 1000;
+    let t = &mut setup.training;
+    (t.epochs, t.batch_shapes, t.surface_points, t.eikonal_points) = (epochs, 2, 128, 128);
+    (t.checkpoint_every, t.lr_halving_epochs) = (3, 4);
+    setup
+}
+
+fn request<'a>(
+    dir: &Path,
+    epochs: u64,
+    resume: bool,
+    stop: Option<&'a AtomicBool>,
+) -> TrainingRequest<'a> {
+    TrainingRequest {
+        out_dir: dir.to_path_buf(),
+        source: DataSource::Synth {
+            count: SHAPES,
+            seed: 5,
+        },
+        setup: tiny_setup(epochs),
+        backend: Backend::Flex,
+        resume,
+        stop,
+    }
+}
+
+fn train_tiny(dir: &Path, epochs: u64) -> TrainingOutcome {
+    train(&request(dir, epochs, false, None), &mut Silent).unwrap()
+}
+
+/// Every parameter value (network weights, biases, latents) in a fixed order.
+fn parameters(decoder: &SdfAutoDecoder) -> Vec<f32> {
+    let mut out: Vec<f32> = Vec::new();
+    for layer in &decoder.network.layers {
+        out.extend(layer.weight.val().into_data().iter::<f32>());
+        if let Some(b) = &layer.bias {
+            out.extend(b.val().into_data().iter::<f32>());
+        }
+    }
+    out.extend(decoder.latents.val().into_data().iter::<f32>());
+    out
+}
+
+fn load(dir: &Path) -> LoadedModel {
+    LoadedModel::load(dir, Backend::Flex).unwrap()
+}
+
+#[test]
+fn a_tiny_run_trains_saves_loads_and_evaluates() {
+    let dir = tempfile::tempdir().unwrap();
+    let outcome = train_tiny(dir.path(), 6);
+    assert!(outcome.finished && outcome.manifest.progress.complete);
+    let model = load(dir.path());
+    let m = &model.manifest;
+    assert_eq!(
+        m.loss_history.iter().map(|l| l.epoch).collect::<Vec<_>>(),
+        [1, 2, 3, 4, 5, 6]
+    );
+    let (first, last) = (m.loss_history[0].total, m.loss_history[5].total);
+    assert!(last < 0.8 * first, "loss falls: {first} → {last}");
+    assert_eq!((m.architecture.latent_dim, m.architecture.hidden), (8, 32));
+    assert_eq!(
+        (m.backend.as_str(), m.software_version.as_str()),
+        ("flex", aortagen::VERSION)
+    );
+    // The stored transforms are the shapes' unit-ball normalisations.
+    let meshes = load_source_meshes(&m.data.source).unwrap();
+    for ((name, mesh), record) in meshes.iter().zip(&m.shapes) {
+        assert_eq!(name, &record.name);
+        assert_eq!(normalize_to_unit_ball(mesh).1, record.transform);
+    }
+    let originals: Vec<_> = meshes.into_iter().map(|(_, mesh)| mesh).collect();
+    let settings = EvaluationSettings {
+        resolution: 24,
+        chamfer_points: 1500,
+        seed: 1,
+    };
+    let mut seen = 0;
+    let report = evaluate_model(&model, &originals, &settings, &mut |_| seen += 1).unwrap();
+    assert_eq!(
+        (seen, report.failures, report.shapes.len()),
+        (SHAPES, 0, SHAPES)
+    );
+    for shape in &report.shapes {
+        let cd = shape.chamfer.unwrap();
+        assert!(
+            cd.is_finite() && cd > shape.sampling_floor,
+            "{}: {cd}",
+            shape.name
+        );
+        assert!(cd < 0.5, "a reconstruction inside the unit ball: {cd}");
+    }
+    let summary = report.summary.unwrap();
+    assert!(summary.min <= summary.median && summary.median <= summary.max);
+    assert!(report.sampling_floor_median > 0.0 && report.sampling_floor_median < summary.min);
+}
+
+#[test]
+fn resuming_after_a_checkpoint_gives_the_uninterrupted_result() {
+    let (straight, split) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let full = train_tiny(straight.path(), 6);
+    train_tiny(split.path(), 3);
+    let resumed = train(&request(split.path(), 6, true, None), &mut Silent).unwrap();
+    assert_eq!(resumed.manifest.loss_history, full.manifest.loss_history);
+    let (a, b) = (load(straight.path()), load(split.path()));
+    assert_eq!(parameters(&a.decoder), parameters(&b.decoder));
+}
+
+/// Raises the stop flag after a number of steps, like Ctrl-C during training.
+struct StopAfter<'a> {
+    steps: usize,
+    flag: &'a AtomicBool,
+}
+
+impl TrainingObserver for StopAfter<'_> {
+    fn on_step(&mut self, _: &StepReport) {
+        self.steps = self.steps.saturating_sub(1);
+        if self.steps == 0 {
+            self.flag.store(true, Ordering::SeqCst);
+        }
+    }
+}
+
+#[test]
+fn an_interrupt_mid_epoch_checkpoints_and_resumes_exactly() {
+    let (straight, split) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let full = train_tiny(straight.path(), 4);
+    let flag = AtomicBool::new(false);
+    // 3 shapes in batches of 2: two steps per epoch; step 5 is the first of epoch 3.
+    let mut observer = StopAfter {
+        steps: 5,
+        flag: &flag,
+    };
+    let stopped = train(&request(split.path(), 4, false, Some(&flag)), &mut observer).unwrap();
+    assert!(!stopped.finished);
+    assert_eq!(
+        (
+            stopped.manifest.progress.epochs_completed,
+            stopped.manifest.progress.next_batch
+        ),
+        (2, 1)
+    );
+    let resumed = train(&request(split.path(), 4, true, None), &mut Silent).unwrap();
+    assert!(resumed.finished);
+    assert_eq!(resumed.manifest.loss_history, full.manifest.loss_history);
+    let (a, b) = (load(straight.path()), load(split.path()));
+    assert_eq!(parameters(&a.decoder), parameters(&b.decoder));
+}
+
+#[test]
+fn starting_over_an_existing_model_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    train_tiny(dir.path(), 1);
+    let err = train(&request(dir.path(), 1, false, None), &mut Silent).unwrap_err();
+    assert!(err.to_string().contains("--resume"), "{err}");
+}
+
+/// A copy of a trained model directory with one damage applied.
+fn damaged(model: &Path, damage: impl FnOnce(&Path)) -> tempfile::TempDir {
+    let copy = tempfile::tempdir().unwrap();
+    for entry in std::fs::read_dir(model).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, copy.path().join(path.file_name().unwrap())).unwrap();
+    }
+    damage(copy.path());
+    copy
+}
+
+fn edit_manifest(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) {
+    let path = dir.join("manifest.json");
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    edit(&mut json);
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+}
+
+/// Replaces the weights and records the new bytes' hash, so only the content is wrong.
+fn replace_weights(dir: &Path, bytes: &[u8]) {
+    std::fs::write(dir.join("weights.bpk"), bytes).unwrap();
+    let record = aortagen::sdf::store::file_record("weights.bpk", bytes);
+    edit_manifest(dir, |m| {
+        m["weights"] = serde_json::to_value(&record).unwrap()
+    });
+}
+
+#[test]
+fn every_kind_of_broken_model_directory_is_a_clear_error() {
+    let trained = tempfile::tempdir().unwrap();
+    train_tiny(trained.path(), 1);
+    let t = trained.path();
+    let weights = std::fs::read(t.join("weights.bpk")).unwrap();
+    type Check = fn(&ModelLoadError) -> bool;
+    let cases: Vec<(&str, tempfile::TempDir, Check)> = vec![
+        (
+            "no manifest",
+            damaged(t, |d| {
+                std::fs::remove_file(d.join("manifest.json")).unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::MissingFile { path } if path.ends_with("manifest.json")),
+        ),
+        (
+            "no weights",
+            damaged(t, |d| std::fs::remove_file(d.join("weights.bpk")).unwrap()),
+            |e| matches!(e, ModelLoadError::MissingFile { path } if path.ends_with("weights.bpk")),
+        ),
+        (
+            "manifest not JSON",
+            damaged(t, |d| {
+                std::fs::write(d.join("manifest.json"), "solid x").unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("not JSON")),
+        ),
+        (
+            "foreign JSON",
+            damaged(t, |d| {
+                std::fs::write(d.join("manifest.json"), r#"{"name":"x"}"#).unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("format")),
+        ),
+        (
+            "future version",
+            damaged(t, |d| edit_manifest(d, |m| m["format_version"] = 99.into())),
+            |e| {
+                matches!(
+                    e,
+                    ModelLoadError::UnsupportedVersion {
+                        found: 99,
+                        supported: 1,
+                        ..
+                    }
+                )
+            },
+        ),
+        (
+            "missing field",
+            damaged(t, |d| {
+                edit_manifest(d, |m| {
+                    m.as_object_mut().unwrap().remove("shapes");
+                })
+            }),
+            |e| matches!(e, ModelLoadError::NotAManifest { reason, .. } if reason.contains("shapes")),
+        ),
+        (
+            "truncated weights",
+            damaged(t, |d| {
+                std::fs::write(d.join("weights.bpk"), &weights[..weights.len() - 9]).unwrap()
+            }),
+            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("truncated")),
+        ),
+        (
+            "flipped byte",
+            damaged(t, |d| {
+                let mut w = weights.clone();
+                let mid = w.len() / 2;
+                w[mid] ^= 1;
+                std::fs::write(d.join("weights.bpk"), w).unwrap();
+            }),
+            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("SHA-256")),
+        ),
+        (
+            "garbage with a matching hash",
+            damaged(t, |d| replace_weights(d, &[7u8; 300])),
+            |e| matches!(e, ModelLoadError::Corrupted { reason, .. } if reason.contains("burnpack")),
+        ),
+        (
+            "other width",
+            damaged(t, |d| {
+                edit_manifest(d, |m| m["architecture"]["hidden"] = 16.into())
+            }),
+            |e| matches!(e, ModelLoadError::ArchitectureMismatch { .. }),
+        ),
+        (
+            "fewer shapes than latents",
+            damaged(t, |d| {
+                edit_manifest(d, |m| {
+                    m["shapes"].as_array_mut().unwrap().pop();
+                })
+            }),
+            |e| matches!(e, ModelLoadError::ArchitectureMismatch { detail, .. } if detail.contains("latents")),
+        ),
+        (
+            "invalid architecture",
+            damaged(t, |d| {
+                edit_manifest(d, |m| m["architecture"]["hidden"] = 0.into())
+            }),
+            |e| matches!(e, ModelLoadError::InvalidArchitecture(_)),
+        ),
+    ];
+    for (name, dir, check) in cases {
+        let err = LoadedModel::load(dir.path(), Backend::Flex).expect_err(name);
+        assert!(check(&err), "{name}: unexpected error {err:?}");
+        assert!(!err.to_string().is_empty());
+    }
+    let err = LoadedModel::load(&PathBuf::from("/nonexistent/model"), Backend::Flex).unwrap_err();
+    assert!(err.to_string().contains("/nonexistent/model"), "{err}");
+}
+
+#[test]
+fn a_damaged_optimizer_state_stops_a_resume() {
+    let dir = tempfile::tempdir().unwrap();
+    train_tiny(dir.path(), 1);
+    let path = dir.path().join("optimizer.bpk");
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    std::fs::write(&path, bytes).unwrap();
+    let err = train(&request(dir.path(), 2, true, None), &mut Silent).unwrap_err();
+    assert!(format!("{err:#}").contains("optimizer.bpk"), "{err:#}");
+}
+
+mod cohort {
+    use super::*;
+    use aortagen::sdf::generate::{CohortSpecError, MixSpec, Mixture, Weighting, generate_shape};
+
+    fn spec(arity: usize, weights: Option<Vec<f64>>) -> MixSpec {
+        MixSpec {
+            arity,
+            weights,
+            weighting: Weighting::Equal,
+        }
+    }
+
+    #[test]
+    fn each_broken_rule_is_named() {
+        type Case = (&'static str, MixSpec, CohortSpecError, &'static str);
+        let cases: Vec<Case> = vec![
+            (
+                "arity 1",
+                spec(1, None),
+                CohortSpecError::ArityTooSmall { arity: 1 },
+                "arity",
+            ),
+            (
+                "arity > shapes",
+                spec(4, None),
+                CohortSpecError::ArityTooLarge {
+                    arity: 4,
+                    shapes: 3,
+                },
+                "arity",
+            ),
+            (
+                "too few weights",
+                spec(3, Some(vec![0.5, 0.5])),
+                CohortSpecError::WeightCount { arity: 3, found: 2 },
+                "weights",
+            ),
+            (
+                "too many weights",
+                spec(2, Some(vec![0.5, 0.25, 0.25])),
+                CohortSpecError::WeightCount { arity: 2, found: 3 },
+                "weights",
+            ),
+            (
+                "negative",
+                spec(2, Some(vec![1.5, -0.5])),
+                CohortSpecError::NegativeWeight {
+                    index: 1,
+                    value: -0.5,
+                },
+                "weights",
+            ),
+            (
+                "infinite",
+                spec(2, Some(vec![f64::INFINITY, 0.0])),
+                CohortSpecError::NonFiniteWeight {
+                    index: 0,
+                    value: f64::INFINITY,
+                },
+                "weights",
+            ),
+            (
+                "sum 0.9",
+                spec(2, Some(vec![0.5, 0.4])),
+                CohortSpecError::WeightSum { sum: 0.9 },
+                "weights",
+            ),
+            (
+                "sum 1 + 2e-6",
+                spec(2, Some(vec![0.5, 0.500002])),
+                CohortSpecError::WeightSum {
+                    sum: 0.5 + 0.500002,
+                },
+                "weights",
+            ),
+        ];
+        for (name, spec, expected, field) in cases {
+            let err = spec.validate(SHAPES).expect_err(name);
+            assert_eq!(err, expected, "{name}");
+            assert_eq!(err.field(), field, "{name}");
+            assert!(err.to_string().contains(field), "{name}: {err}");
+        }
+        // NaN compares unequal to itself: check the variant and the message.
+        let err = spec(2, Some(vec![f64::NAN, 1.0]))
+            .validate(SHAPES)
+            .unwrap_err();
+        assert!(
+            matches!(err, CohortSpecError::NonFiniteWeight { index: 0, .. }),
+            "{err:?}"
+        );
+        assert!(err.to_string().contains("finite"), "{err}");
+        assert_eq!(
+            spec(3, Some(vec![0.2, 0.3, 0.5 + 5e-7])).validate(SHAPES),
+            Ok(())
+        );
+        assert_eq!(spec(2, Some(vec![1.0, 0.0])).validate(SHAPES), Ok(()));
+    }
+
+    #[test]
+    fn mixtures_are_seeded_distinct_and_convex() {
+        let dirichlet = MixSpec {
+            arity: 3,
+            weights: None,
+            weighting: Weighting::Dirichlet,
+        };
+        let mut seen = std::collections::HashSet::new();
+        for shape in 0..20 {
+            let m = dirichlet.mixture(10, 42, shape).unwrap();
+            assert_eq!(
+                m,
+                dirichlet.mixture(10, 42, shape).unwrap(),
+                "same seed, same shape"
+            );
+            let mut idx = m.indices.clone();
+            idx.sort_unstable();
+            idx.dedup();
+            assert_eq!(idx.len(), 3);
+            assert!(idx.iter().all(|&i| i < 10));
+            assert!(m.weights.iter().all(|&w| w >= 0.0));
+            assert!((m.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            seen.insert(format!("{:?}", m.weights));
+        }
+        assert_eq!(seen.len(), 20, "Dirichlet weights differ between shapes");
+        assert_ne!(
+            dirichlet.mixture(10, 42, 0).unwrap(),
+            dirichlet.mixture(10, 43, 0).unwrap()
+        );
+        let equal = spec(4, None).mixture(10, 1, 0).unwrap();
+        assert_eq!(equal.weights, [0.25; 4]);
+        let given = spec(2, Some(vec![0.3, 0.7])).mixture(10, 1, 0).unwrap();
+        assert_eq!(given.weights, [0.3, 0.7]);
+    }
+
+    #[test]
+    fn latents_and_transforms_mix_with_the_same_weights() {
+        use aortagen::geometry::normalize::UnitBallTransform;
+        let m = Mixture {
+            indices: vec![2, 0],
+            weights: vec![0.25, 0.75],
+        };
+        let latents = vec![vec![1.0, 0.0], vec![9.0, 9.0], vec![0.0, 4.0]];
+        assert_eq!(m.mix_latents(&latents), [0.75, 1.0]);
+        let t = |c: f64, r: f64| UnitBallTransform {
+            centre: [c, 0.0, -c],
+            radius: r,
+        };
+        let mixed = m
+            .mix_transforms(&[t(4.0, 10.0), t(0.0, 1.0), t(8.0, 30.0)])
+            .unwrap();
+        assert!((mixed.radius - (0.25 * 30.0 + 0.75 * 10.0)).abs() < 1e-12);
+        assert!((mixed.centre[0] - 5.0).abs() < 1e-12 && (mixed.centre[2] + 5.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn generated_shapes_are_meshes_with_blended_transforms() {
+        let dir = tempfile::tempdir().unwrap();
+        train_tiny(dir.path(), 2);
+        let model = load(dir.path());
+        let latents = model.latents();
+        let dirichlet = MixSpec {
+            arity: 2,
+            weights: None,
+            weighting: Weighting::Dirichlet,
+        };
+        let shape = generate_shape(&model, &latents, &dirichlet, 7, 1, 20).unwrap();
+        assert_eq!(shape.mixture, dirichlet.mixture(SHAPES, 7, 1).unwrap());
+        shape.mesh.validate().unwrap();
+        let transforms = model.manifest.transforms();
+        let radius: f64 = shape
+            .mixture
+            .indices
+            .iter()
+            .zip(&shape.mixture.weights)
+            .map(|(&i, &w)| w * transforms[i].radius)
+            .sum();
+        assert!((shape.transform.radius - radius).abs() < 1e-9);
+        let mm = shape.mesh_in_mesh_units();
+        let p = shape.mesh.positions[0].map(f64::from);
+        let q = shape.transform.to_mesh_units(p);
+        assert!((0..3).all(|c| (f64::from(mm.positions[0][c]) - q[c]).abs() < 1e-3));
+        let err = generate_shape(&model, &latents, &spec(5, None), 7, 0, 20).unwrap_err();
+        assert!(err.to_string().contains("arity"), "{err}");
+    }
+}
