@@ -138,10 +138,11 @@ impl TriMesh {
                     normals.len()
                 )));
             }
-            if let Some(i) = normals.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
-                return Err(MeshError::BadNormals(format!(
-                    "normal {i} is not finite"
-                )));
+            if let Some(i) = normals
+                .iter()
+                .position(|v| v.iter().any(|c| !c.is_finite()))
+            {
+                return Err(MeshError::BadNormals(format!("normal {i} is not finite")));
             }
         }
         if (0..self.triangles.len()).all(|t| self.triangle_area(t) <= 0.0) {
@@ -173,7 +174,9 @@ impl TriMesh {
 
     /// Total surface area.
     pub fn area(&self) -> f64 {
-        (0..self.triangles.len()).map(|t| self.triangle_area(t)).sum()
+        (0..self.triangles.len())
+            .map(|t| self.triangle_area(t))
+            .sum()
     }
 
     /// Signed enclosed volume (divergence theorem); positive for a closed mesh whose
@@ -207,7 +210,8 @@ impl TriMesh {
     pub fn edge_report(&self) -> EdgeReport {
         // Count each directed edge; an undirected edge is closed and oriented when it
         // appears exactly once in each direction.
-        let mut directed: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 3);
+        let mut directed: HashMap<(u32, u32), u32> =
+            HashMap::with_capacity(self.triangles.len() * 3);
         for t in &self.triangles {
             for k in 0..3 {
                 *directed.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
@@ -308,12 +312,18 @@ mod tests {
             .map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
             .collect();
         let triangles = vec![
-            [0, 2, 1], [1, 2, 3], // z = 0, facing -z
-            [4, 5, 6], [5, 7, 6], // z = 1
-            [0, 1, 4], [1, 5, 4], // y = 0
-            [2, 6, 3], [3, 6, 7], // y = 1
-            [0, 4, 2], [2, 4, 6], // x = 0
-            [1, 3, 5], [3, 7, 5], // x = 1
+            [0, 2, 1],
+            [1, 2, 3], // z = 0, facing -z
+            [4, 5, 6],
+            [5, 7, 6], // z = 1
+            [0, 1, 4],
+            [1, 5, 4], // y = 0
+            [2, 6, 3],
+            [3, 6, 7], // y = 1
+            [0, 4, 2],
+            [2, 4, 6], // x = 0
+            [1, 3, 5],
+            [3, 7, 5], // x = 1
         ];
         TriMesh::new(positions, triangles)
     }
@@ -343,15 +353,25 @@ mod tests {
     fn validation_names_the_problem() {
         let mut m = cube();
         m.positions[3][1] = f32::NAN;
-        assert!(matches!(m.validate(), Err(MeshError::NonFinite { vertex: 3, .. })));
+        assert!(matches!(
+            m.validate(),
+            Err(MeshError::NonFinite { vertex: 3, .. })
+        ));
         let mut m = cube();
         m.triangles[5][2] = 99;
         assert_eq!(
             m.validate(),
-            Err(MeshError::IndexOutOfRange { triangle: 5, index: 99, vertices: 8 })
+            Err(MeshError::IndexOutOfRange {
+                triangle: 5,
+                index: 99,
+                vertices: 8
+            })
         );
         let m = TriMesh::new(vec![[0.0; 3]; 3], vec![[0, 1, 2]]);
         assert_eq!(m.validate(), Err(MeshError::AllDegenerate(1)));
-        assert!(matches!(TriMesh::default().validate(), Err(MeshError::Empty { .. })));
+        assert!(matches!(
+            TriMesh::default().validate(),
+            Err(MeshError::Empty { .. })
+        ));
     }
 }
