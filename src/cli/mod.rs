@@ -1,5 +1,7 @@
 //! The `aortagen` command line: one subcommand per capability.
 
+pub mod serve;
+
 use clap::{Parser, Subcommand};
 
 /// Generative models of aortic shapes and synthetic cohorts for in-silico trials.
@@ -13,10 +15,15 @@ pub struct Cli {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Run the cohort service: REST API and job workers on a SQLite database.
+    Serve(serve::ServeArgs),
+}
 
 /// Parses the process arguments and runs the chosen subcommand.
 pub fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    match cli.command {}
+    match cli.command {
+        Command::Serve(args) => serve::run(args),
+    }
 }

@@ -9,12 +9,25 @@ use super::{FormatError, LoadedMesh, MeshFormat, guard};
 use crate::geometry::{TriMesh, cross, dot};
 
 type Matrix = [[f64; 4]; 4];
-const IDENTITY: Matrix = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+const IDENTITY: Matrix = [
+    [1.0, 0.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0, 0.0],
+    [0.0, 0.0, 0.0, 1.0],
+];
 
 /// Reads glTF JSON or GLB (told apart by the magic bytes). External buffer files are only
 /// followed when `dir` is given, and only to files inside it.
-pub(super) fn read(bytes: &[u8], name: &str, dir: Option<&Path>) -> Result<LoadedMesh, FormatError> {
-    let format = if bytes.starts_with(b"glTF") { MeshFormat::Glb } else { MeshFormat::Gltf };
+pub(super) fn read(
+    bytes: &[u8],
+    name: &str,
+    dir: Option<&Path>,
+) -> Result<LoadedMesh, FormatError> {
+    let format = if bytes.starts_with(b"glTF") {
+        MeshFormat::Glb
+    } else {
+        MeshFormat::Gltf
+    };
     let malformed = |msg: String| FormatError::malformed(name, format, msg);
     let gltf = guard(|| gltf::Gltf::from_slice(bytes))
         .map_err(malformed)?
@@ -36,7 +49,12 @@ pub(super) fn read(bytes: &[u8], name: &str, dir: Option<&Path>) -> Result<Loade
         .and_then(|e| e.get("units"))
         .and_then(|u| u.as_str())
         .map(str::to_owned);
-    Ok(LoadedMesh { mesh, format, units, extras })
+    Ok(LoadedMesh {
+        mesh,
+        format,
+        units,
+        extras,
+    })
 }
 
 /// Rejects external buffers when there is no directory, and any that leave it.
@@ -47,7 +65,9 @@ fn check_buffer_uris(
     dir: Option<&Path>,
 ) -> Result<(), FormatError> {
     for buffer in document.buffers() {
-        let gltf::buffer::Source::Uri(uri) = buffer.source() else { continue };
+        let gltf::buffer::Source::Uri(uri) = buffer.source() else {
+            continue;
+        };
         if uri.starts_with("data:") {
             continue;
         }
@@ -63,7 +83,10 @@ fn check_buffer_uris(
                 buffer.index()
             )));
         }
-        if uri.contains(':') || uri.starts_with(['/', '\\']) || uri.split(['/', '\\']).any(|p| p == "..") {
+        if uri.contains(':')
+            || uri.starts_with(['/', '\\'])
+            || uri.split(['/', '\\']).any(|p| p == "..")
+        {
             return Err(unsupported(format!(
                 "buffer {} refers to {uri:?}, which is not a file inside the glTF's directory",
                 buffer.index()
@@ -95,14 +118,34 @@ fn collect(
         if let Some(mesh) = node.mesh() {
             instanced[mesh.index()] = true;
             let world = world_matrix(&nodes, &parents, node.index());
-            append_mesh(&mut out, &mut normals_complete, &mesh, &world, buffers, name, format)?;
+            append_mesh(
+                &mut out,
+                &mut normals_complete,
+                &mesh,
+                &world,
+                buffers,
+                name,
+                format,
+            )?;
         }
     }
     for mesh in document.meshes().filter(|m| !instanced[m.index()]) {
-        append_mesh(&mut out, &mut normals_complete, &mesh, &IDENTITY, buffers, name, format)?;
+        append_mesh(
+            &mut out,
+            &mut normals_complete,
+            &mesh,
+            &IDENTITY,
+            buffers,
+            name,
+            format,
+        )?;
     }
     if out.triangles.is_empty() {
-        return Err(FormatError::malformed(name, format, "no triangle primitives with positions"));
+        return Err(FormatError::malformed(
+            name,
+            format,
+            "no triangle primitives with positions",
+        ));
     }
     if !normals_complete {
         out.normals = None;
@@ -134,14 +177,20 @@ fn append_mesh(
             None => (0..count as u32).collect(),
         };
         if indices.len() % 3 != 0 {
-            return Err(err(format!("{} indices is not a multiple of 3", indices.len())));
+            return Err(err(format!(
+                "{} indices is not a multiple of 3",
+                indices.len()
+            )));
         }
         if let Some(&bad) = indices.iter().find(|&&i| i as usize >= count) {
-            return Err(err(format!("an index refers to vertex {bad} but only {count} exist")));
+            return Err(err(format!(
+                "an index refers to vertex {bad} but only {count} exist"
+            )));
         }
         let normals: Option<Vec<[f32; 3]>> = reader.read_normals().map(Iterator::collect);
         let base = out.positions.len() as u32;
-        out.positions.extend(positions.iter().map(|p| transform_point(m, *p)));
+        out.positions
+            .extend(positions.iter().map(|p| transform_point(m, *p)));
         match normals {
             Some(n) if n.len() == count => {
                 let normals = out.normals.get_or_insert_with(Vec::new);
@@ -152,7 +201,12 @@ fn append_mesh(
         }
         out.triangles.extend(indices.chunks_exact(3).map(|t| {
             // A mirroring transform turns outward triangles inward: swap to keep them outward.
-            if det < 0.0 { [t[0], t[2], t[1]] } else { [t[0], t[1], t[2]] }.map(|i| base + i)
+            if det < 0.0 {
+                [t[0], t[2], t[1]]
+            } else {
+                [t[0], t[1], t[2]]
+            }
+            .map(|i| base + i)
         }));
     }
     Ok(())
@@ -163,7 +217,9 @@ fn world_matrix(nodes: &[gltf::Node<'_>], parents: &[Option<usize>], node: usize
     let mut world = local_matrix(&nodes[node]);
     let mut current = node;
     for _ in 0..nodes.len() {
-        let Some(parent) = parents[current] else { break };
+        let Some(parent) = parents[current] else {
+            break;
+        };
         world = multiply(&local_matrix(&nodes[parent]), &world);
         current = parent;
     }
@@ -195,13 +251,24 @@ fn transform_normal(m: &Matrix, det: f64, n: [f32; 3]) -> [f32; 3] {
         return n;
     }
     let row = |r: usize| [m[r][0], m[r][1], m[r][2]];
-    let cofactor = [cross(row(1), row(2)), cross(row(2), row(0)), cross(row(0), row(1))];
+    let cofactor = [
+        cross(row(1), row(2)),
+        cross(row(2), row(0)),
+        cross(row(0), row(1)),
+    ];
     let n = n.map(f64::from);
     let v: [f64; 3] = std::array::from_fn(|i| dot(cofactor[i], n) * det.signum());
     let len = dot(v, v).sqrt();
-    if len > 0.0 { v.map(|c| (c / len) as f32) } else { [0.0; 3] }
+    if len > 0.0 {
+        v.map(|c| (c / len) as f32)
+    } else {
+        [0.0; 3]
+    }
 }
 
 fn determinant3(m: &Matrix) -> f64 {
-    dot([m[0][0], m[0][1], m[0][2]], cross([m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]))
+    dot(
+        [m[0][0], m[0][1], m[0][2]],
+        cross([m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]),
+    )
 }

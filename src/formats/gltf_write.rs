@@ -27,7 +27,8 @@ pub(super) fn write_glb(mesh: &TriMesh, meta: &MeshMetadata) -> Result<Vec<u8>, 
         bin: Some(Cow::Owned(bin)),
     };
     let mut out = Vec::new();
-    glb.to_writer(&mut out).map_err(|e| write_error(MeshFormat::Glb, e))?;
+    glb.to_writer(&mut out)
+        .map_err(|e| write_error(MeshFormat::Glb, e))?;
     Ok(out)
 }
 
@@ -49,7 +50,11 @@ fn write_error(format: MeshFormat, e: impl std::fmt::Display) -> FormatError {
 /// Positions, then normals (if any), then indices: all 4-byte quantities, so every view
 /// starts 4-byte aligned.
 fn buffer_bytes(mesh: &TriMesh) -> Vec<u8> {
-    let floats = mesh.positions.iter().chain(mesh.normals.iter().flatten()).flatten();
+    let floats = mesh
+        .positions
+        .iter()
+        .chain(mesh.normals.iter().flatten())
+        .flatten();
     let indices = mesh.triangles.iter().flatten();
     floats
         .flat_map(|f| f.to_le_bytes())
@@ -103,14 +108,36 @@ fn document(
         .normals
         .as_ref()
         .map(|_| view(&mut root, vertex_bytes, json::buffer::Target::ArrayBuffer));
-    let indices_view = view(&mut root, 12 * mesh.triangle_count(), json::buffer::Target::ElementArrayBuffer);
+    let indices_view = view(
+        &mut root,
+        12 * mesh.triangle_count(),
+        json::buffer::Target::ElementArrayBuffer,
+    );
 
     let (min, max) = bounds(&mesh.positions);
-    let positions = root.push(accessor(positions_view, mesh.vertex_count(), json::accessor::Type::Vec3, json::accessor::ComponentType::F32, Some((min, max))));
+    let positions = root.push(accessor(
+        positions_view,
+        mesh.vertex_count(),
+        json::accessor::Type::Vec3,
+        json::accessor::ComponentType::F32,
+        Some((min, max)),
+    ));
     let normals = normals_view.map(|v| {
-        root.push(accessor(v, mesh.vertex_count(), json::accessor::Type::Vec3, json::accessor::ComponentType::F32, None))
+        root.push(accessor(
+            v,
+            mesh.vertex_count(),
+            json::accessor::Type::Vec3,
+            json::accessor::ComponentType::F32,
+            None,
+        ))
     });
-    let indices = root.push(accessor(indices_view, 3 * mesh.triangle_count(), json::accessor::Type::Scalar, json::accessor::ComponentType::U32, None));
+    let indices = root.push(accessor(
+        indices_view,
+        3 * mesh.triangle_count(),
+        json::accessor::Type::Scalar,
+        json::accessor::ComponentType::U32,
+        None,
+    ));
 
     let mut attributes = BTreeMap::new();
     attributes.insert(Valid(json::mesh::Semantic::Positions), positions);
@@ -192,7 +219,11 @@ fn base64(bytes: &[u8]) -> String {
     const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for chunk in bytes.chunks(3) {
-        let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
         let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
         for k in 0..4 {
             if k <= chunk.len() {

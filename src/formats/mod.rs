@@ -168,7 +168,10 @@ impl MeshMetadata {
             lines.push(format!("provenance {}", self.extras));
         }
         // One comment per line, whatever the strings hold.
-        lines.into_iter().map(|l| l.replace(['\n', '\r'], " ")).collect()
+        lines
+            .into_iter()
+            .map(|l| l.replace(['\n', '\r'], " "))
+            .collect()
     }
 }
 
@@ -199,7 +202,11 @@ pub fn read_mesh_file(path: &Path) -> Result<TriMesh, FormatError> {
 
 /// Reads and validates a mesh held in memory. A glTF given this way must embed its
 /// buffers (GLB chunk or data URI): there is no directory to find external files in.
-pub fn read_mesh_bytes(bytes: &[u8], format: MeshFormat, name: &str) -> Result<TriMesh, FormatError> {
+pub fn read_mesh_bytes(
+    bytes: &[u8],
+    format: MeshFormat,
+    name: &str,
+) -> Result<TriMesh, FormatError> {
     load_mesh_bytes(bytes, format, name).map(|l| l.mesh)
 }
 
@@ -216,16 +223,31 @@ pub fn load_mesh_file(path: &Path) -> Result<LoadedMesh, FormatError> {
         Ok(f) => f,
         Err(e) => MeshFormat::sniff(&bytes).ok_or(e)?,
     };
-    let dir = path.parent().map(|d| if d.as_os_str().is_empty() { Path::new(".") } else { d });
+    let dir = path.parent().map(|d| {
+        if d.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            d
+        }
+    });
     load(&bytes, format, &name, dir)
 }
 
 /// Like [`read_mesh_bytes`], also returning the units and extras found in the bytes.
-pub fn load_mesh_bytes(bytes: &[u8], format: MeshFormat, name: &str) -> Result<LoadedMesh, FormatError> {
+pub fn load_mesh_bytes(
+    bytes: &[u8],
+    format: MeshFormat,
+    name: &str,
+) -> Result<LoadedMesh, FormatError> {
     load(bytes, format, name, None)
 }
 
-fn load(bytes: &[u8], format: MeshFormat, name: &str, dir: Option<&Path>) -> Result<LoadedMesh, FormatError> {
+fn load(
+    bytes: &[u8],
+    format: MeshFormat,
+    name: &str,
+    dir: Option<&Path>,
+) -> Result<LoadedMesh, FormatError> {
     if bytes.is_empty() {
         return Err(FormatError::malformed(name, format, "empty file (0 bytes)"));
     }
@@ -248,12 +270,17 @@ fn load(bytes: &[u8], format: MeshFormat, name: &str, dir: Option<&Path>) -> Res
 }
 
 /// Encodes a mesh in `format`. The mesh is validated first: nothing invalid is written.
-pub fn write_mesh(mesh: &TriMesh, format: MeshFormat, meta: &MeshMetadata) -> Result<Vec<u8>, FormatError> {
+pub fn write_mesh(
+    mesh: &TriMesh,
+    format: MeshFormat,
+    meta: &MeshMetadata,
+) -> Result<Vec<u8>, FormatError> {
     mesh.validate().map_err(|e| FormatError::Write {
         format,
         message: e.to_string(),
     })?;
-    if u32::try_from(mesh.triangles.len()).is_err() || u32::try_from(mesh.positions.len()).is_err() {
+    if u32::try_from(mesh.triangles.len()).is_err() || u32::try_from(mesh.positions.len()).is_err()
+    {
         return Err(FormatError::Write {
             format,
             message: "more than 2^32 - 1 vertices or triangles".to_owned(),
@@ -269,7 +296,11 @@ pub fn write_mesh(mesh: &TriMesh, format: MeshFormat, meta: &MeshMetadata) -> Re
 }
 
 /// Writes a mesh to `path` in the format named by its extension.
-pub fn write_mesh_file(path: &Path, mesh: &TriMesh, meta: &MeshMetadata) -> Result<(), FormatError> {
+pub fn write_mesh_file(
+    path: &Path,
+    mesh: &TriMesh,
+    meta: &MeshMetadata,
+) -> Result<(), FormatError> {
     let format = MeshFormat::from_path(path)?;
     let bytes = write_mesh(mesh, format, meta)?;
     std::fs::write(path, bytes).map_err(|source| FormatError::Io {
@@ -330,7 +361,10 @@ mod tests {
 
     #[test]
     fn units_are_found_in_the_usual_spellings() {
-        assert_eq!(units_in("SynthAorta surface, units mm").as_deref(), Some("mm"));
+        assert_eq!(
+            units_in("SynthAorta surface, units mm").as_deref(),
+            Some("mm")
+        );
         assert_eq!(units_in("UNITS: m").as_deref(), Some("m"));
         assert_eq!(units_in("units=unit").as_deref(), Some("unit"));
         assert_eq!(units_in("one unit is 105 mm"), None);
@@ -342,7 +376,13 @@ mod tests {
     fn formats_parse_case_insensitively_and_print_their_names() {
         assert_eq!("GLB".parse::<MeshFormat>().unwrap(), MeshFormat::Glb);
         assert_eq!(".Ply".parse::<MeshFormat>().unwrap(), MeshFormat::Ply);
-        assert!("step".parse::<MeshFormat>().unwrap_err().to_string().contains("step"));
+        assert!(
+            "step"
+                .parse::<MeshFormat>()
+                .unwrap_err()
+                .to_string()
+                .contains("step")
+        );
         let p = Path::new("/tmp/Shape.STL");
         assert_eq!(MeshFormat::from_path(p).unwrap(), MeshFormat::Stl);
         assert_eq!(MeshFormat::Gltf.to_string(), "glTF");
@@ -351,8 +391,14 @@ mod tests {
     #[test]
     fn sniffing_recognises_self_announcing_formats() {
         assert_eq!(MeshFormat::sniff(b"glTF\x02\0\0\0"), Some(MeshFormat::Glb));
-        assert_eq!(MeshFormat::sniff(b"  {\"asset\":{}}"), Some(MeshFormat::Gltf));
-        assert_eq!(MeshFormat::sniff(b"ply\nformat ascii 1.0\n"), Some(MeshFormat::Ply));
+        assert_eq!(
+            MeshFormat::sniff(b"  {\"asset\":{}}"),
+            Some(MeshFormat::Gltf)
+        );
+        assert_eq!(
+            MeshFormat::sniff(b"ply\nformat ascii 1.0\n"),
+            Some(MeshFormat::Ply)
+        );
         assert_eq!(MeshFormat::sniff(b"solid x\n"), None);
     }
 }

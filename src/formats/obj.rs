@@ -16,7 +16,10 @@ pub(super) fn read(bytes: &[u8], name: &str) -> Result<LoadedMesh, FormatError> 
         ignore_points: true,
         ignore_lines: true,
     };
-    let mut source = LineCounter { data: bytes, pos: 0 };
+    let mut source = LineCounter {
+        data: bytes,
+        pos: 0,
+    };
     let loaded = guard(|| {
         let result = tobj::load_obj_buf(&mut source, &options, |_| {
             Err(tobj::LoadError::MaterialParseError) // materials are ignored
@@ -47,7 +50,11 @@ fn merge(models: &[tobj::Model], name: &str) -> Result<TriMesh, FormatError> {
     for model in models {
         let m = &model.mesh;
         if m.positions.len() % 3 != 0 || m.indices.len() % 3 != 0 {
-            return Err(FormatError::malformed(name, MeshFormat::Obj, "incomplete vertex or face data"));
+            return Err(FormatError::malformed(
+                name,
+                MeshFormat::Obj,
+                "incomplete vertex or face data",
+            ));
         }
         let remap: Vec<u32> = m
             .positions
@@ -60,7 +67,9 @@ fn merge(models: &[tobj::Model], name: &str) -> Result<TriMesh, FormatError> {
                     (mesh.positions.len() - 1) as u32
                 };
                 if welding {
-                    *weld.entry(p.map(|c| (c + 0.0).to_bits())).or_insert_with(add)
+                    *weld
+                        .entry(p.map(|c| (c + 0.0).to_bits()))
+                        .or_insert_with(add)
                 } else {
                     add()
                 }
@@ -75,11 +84,9 @@ fn merge(models: &[tobj::Model], name: &str) -> Result<TriMesh, FormatError> {
                 normals[v as usize].get_or_insert(n);
             }
         }
-        mesh.triangles.extend(
-            m.indices
-                .chunks_exact(3)
-                .map(|t| [t[0], t[1], t[2]].map(|i| remap.get(i as usize).copied().unwrap_or(u32::MAX))),
-        );
+        mesh.triangles.extend(m.indices.chunks_exact(3).map(|t| {
+            [t[0], t[1], t[2]].map(|i| remap.get(i as usize).copied().unwrap_or(u32::MAX))
+        }));
     }
     if normals.iter().all(Option::is_some) && !normals.is_empty() {
         mesh.normals = Some(normals.into_iter().flatten().collect());
@@ -94,11 +101,15 @@ fn describe(bytes: &[u8], name: &str, e: tobj::LoadError, line: usize) -> Format
     match e {
         L::FaceVertexOutOfBounds | L::FaceNormalOutOfBounds | L::FaceTexCoordOutOfBounds => {
             match find_bad_index(bytes) {
-                Some((line, msg)) => FormatError::malformed_at(name, MeshFormat::Obj, format!("line {line}"), msg),
+                Some((line, msg)) => {
+                    FormatError::malformed_at(name, MeshFormat::Obj, format!("line {line}"), msg)
+                }
                 None => FormatError::malformed(name, MeshFormat::Obj, e.to_string()),
             }
         }
-        _ => FormatError::malformed_at(name, MeshFormat::Obj, format!("line {line}"), e.to_string()),
+        _ => {
+            FormatError::malformed_at(name, MeshFormat::Obj, format!("line {line}"), e.to_string())
+        }
     }
 }
 
@@ -120,9 +131,15 @@ fn find_bad_index(bytes: &[u8]) -> Option<(usize, String)> {
             Some("f") => {
                 for corner in words {
                     for (slot, field) in corner.split('/').enumerate().take(3) {
-                        let Ok(raw) = field.parse::<i64>() else { continue };
+                        let Ok(raw) = field.parse::<i64>() else {
+                            continue;
+                        };
                         let what = ["vertex", "texture coordinate", "normal"][slot];
-                        let resolved = if raw < 0 { seen[slot] as i64 + raw + 1 } else { raw };
+                        let resolved = if raw < 0 {
+                            seen[slot] as i64 + raw + 1
+                        } else {
+                            raw
+                        };
                         if raw == 0 || resolved < 1 || resolved > totals[slot] as i64 {
                             return Some((
                                 n + 1,
@@ -159,7 +176,11 @@ impl LineCounter<'_> {
     fn line(&self) -> usize {
         let consumed = &self.data[..self.pos];
         let newlines = consumed.iter().filter(|&&b| b == b'\n').count();
-        if consumed.last() == Some(&b'\n') { newlines } else { newlines + 1 }
+        if consumed.last() == Some(&b'\n') {
+            newlines
+        } else {
+            newlines + 1
+        }
     }
 }
 

@@ -14,12 +14,17 @@ const FORMAT: MeshFormat = MeshFormat::Ply;
 
 /// Reads a PLY file; errors name the header line, the payload line (ASCII) or the element.
 pub(super) fn read(bytes: &[u8], name: &str) -> Result<LoadedMesh, FormatError> {
-    let (header, vertices, faces) = guard(|| parse(bytes, name))
-        .map_err(|msg| FormatError::malformed(name, FORMAT, msg))??;
-    let units = header.comments.iter().chain(&header.obj_infos).find_map(|c| units_in(c));
+    let (header, vertices, faces) =
+        guard(|| parse(bytes, name)).map_err(|msg| FormatError::malformed(name, FORMAT, msg))??;
+    let units = header
+        .comments
+        .iter()
+        .chain(&header.obj_infos)
+        .find_map(|c| units_in(c));
     let mut mesh = TriMesh {
-        positions: coordinates(&vertices, ["x", "y", "z"], name, "position")?
-            .ok_or_else(|| FormatError::malformed(name, FORMAT, "element 'vertex' lacks x, y or z"))?,
+        positions: coordinates(&vertices, ["x", "y", "z"], name, "position")?.ok_or_else(|| {
+            FormatError::malformed(name, FORMAT, "element 'vertex' lacks x, y or z")
+        })?,
         triangles: Vec::new(),
         normals: coordinates(&vertices, ["nx", "ny", "nz"], name, "normal")?,
     };
@@ -39,32 +44,42 @@ fn parse(bytes: &[u8], name: &str) -> Result<Parsed, FormatError> {
     let parser = Parser::<DefaultElement>::new();
     let mut reader = Reader::new(bytes);
     let header = parser.read_header(&mut reader).map_err(|e| {
-        let at = e.line().map(|l| format!("header line {l}")).unwrap_or_else(|| "header".into());
+        let at = e
+            .line()
+            .map(|l| format!("header line {l}"))
+            .unwrap_or_else(|| "header".into());
         FormatError::malformed_at(name, FORMAT, at, flatten(&e.to_string()))
     })?;
     let (mut vertices, mut faces) = (None, None);
     for (key, def) in &header.elements {
-        let elements = parser.read_payload_for_element(&mut reader, def, &header).map_err(|e| {
-            let at = match (header.encoding, e.line()) {
-                (Encoding::Ascii, Some(l)) => format!("line {l} (element '{key}')"),
-                _ => format!("element '{key}'"),
-            };
-            let message = format!(
-                "{} (header declares {} '{key}' elements, {:?} encoding; file truncated?)",
-                flatten(&e.to_string()),
-                def.count,
-                header.encoding
-            );
-            FormatError::malformed_at(name, FORMAT, at, message)
-        })?;
+        let elements = parser
+            .read_payload_for_element(&mut reader, def, &header)
+            .map_err(|e| {
+                let at = match (header.encoding, e.line()) {
+                    (Encoding::Ascii, Some(l)) => format!("line {l} (element '{key}')"),
+                    _ => format!("element '{key}'"),
+                };
+                let message = format!(
+                    "{} (header declares {} '{key}' elements, {:?} encoding; file truncated?)",
+                    flatten(&e.to_string()),
+                    def.count,
+                    header.encoding
+                );
+                FormatError::malformed_at(name, FORMAT, at, message)
+            })?;
         match key.as_str() {
             "vertex" => vertices = Some(elements),
             "face" => faces = Some(elements),
             _ => {}
         }
     }
-    let missing = |what| FormatError::malformed_at(name, FORMAT, "header", format!("no '{what}' element"));
-    Ok((header, vertices.ok_or_else(|| missing("vertex"))?, faces.ok_or_else(|| missing("face"))?))
+    let missing =
+        |what| FormatError::malformed_at(name, FORMAT, "header", format!("no '{what}' element"));
+    Ok((
+        header,
+        vertices.ok_or_else(|| missing("vertex"))?,
+        faces.ok_or_else(|| missing("face"))?,
+    ))
 }
 
 /// The parser's multi-line messages on one line, without its own "Line N:" prefix.
@@ -110,23 +125,42 @@ fn coordinates(
 
 /// Face lists to triangles: fans for polygons, with each index checked against the
 /// vertex count.
-fn triangulate(faces: &[DefaultElement], vertices: usize, name: &str) -> Result<Vec<[u32; 3]>, FormatError> {
+fn triangulate(
+    faces: &[DefaultElement],
+    vertices: usize,
+    name: &str,
+) -> Result<Vec<[u32; 3]>, FormatError> {
     let mut triangles = Vec::with_capacity(faces.len());
     for (f, face) in faces.iter().enumerate() {
         let at = || format!("face {f}");
         let list = face
             .get("vertex_indices")
             .or_else(|| face.get("vertex_index"))
-            .ok_or_else(|| FormatError::malformed_at(name, FORMAT, at(), "no 'vertex_indices' or 'vertex_index' list"))?;
+            .ok_or_else(|| {
+                FormatError::malformed_at(
+                    name,
+                    FORMAT,
+                    at(),
+                    "no 'vertex_indices' or 'vertex_index' list",
+                )
+            })?;
         let indices = list.to_u32_list().ok_or_else(|| {
-            FormatError::malformed_at(name, FORMAT, at(), "vertex index list holds negative or non-integer values")
+            FormatError::malformed_at(
+                name,
+                FORMAT,
+                at(),
+                "vertex index list holds negative or non-integer values",
+            )
         })?;
         if indices.len() < 3 {
             return Err(FormatError::malformed_at(
                 name,
                 FORMAT,
                 at(),
-                format!("a face needs at least 3 vertices, this one has {}", indices.len()),
+                format!(
+                    "a face needs at least 3 vertices, this one has {}",
+                    indices.len()
+                ),
             ));
         }
         if let Some(&bad) = indices.iter().find(|&&i| i as usize >= vertices) {

@@ -17,7 +17,10 @@ pub(super) fn read(bytes: &[u8], name: &str) -> Result<LoadedMesh, FormatError> 
         (read_ascii(bytes, name)?, units_in(&first_line(bytes)))
     } else {
         let header = String::from_utf8_lossy(&bytes[..bytes.len().min(HEADER)]);
-        (read_binary(bytes, name)?, units_in(header.trim_end_matches('\0')))
+        (
+            read_binary(bytes, name)?,
+            units_in(header.trim_end_matches('\0')),
+        )
     };
     Ok(LoadedMesh {
         mesh,
@@ -35,7 +38,9 @@ fn is_ascii(bytes: &[u8]) -> bool {
     let textual = head
         .iter()
         .all(|b| b.is_ascii_graphic() || b.is_ascii_whitespace());
-    starts_solid && textual && binary_count(bytes).is_none_or(|n| HEADER + 4 + FACET * n != bytes.len())
+    starts_solid
+        && textual
+        && binary_count(bytes).is_none_or(|n| HEADER + 4 + FACET * n != bytes.len())
 }
 
 fn binary_count(bytes: &[u8]) -> Option<usize> {
@@ -65,7 +70,9 @@ fn read_binary(bytes: &[u8], name: &str) -> Result<TriMesh, FormatError> {
         return Err(FormatError::malformed(
             name,
             MeshFormat::Stl,
-            format!("truncated binary STL: header says {count} triangles, file holds bytes for {holds}"),
+            format!(
+                "truncated binary STL: header says {count} triangles, file holds bytes for {holds}"
+            ),
         ));
     }
     // stl_io decides ASCII vs binary by a "solid " prefix; hide it so that binary is parsed.
@@ -102,8 +109,14 @@ fn collect(data: &[u8], name: &str, at: impl Fn(usize) -> String) -> Result<TriM
             .map_err(|e| FormatError::malformed(name, MeshFormat::Stl, e.to_string()))?;
         let mut welder = Welder::default();
         for (i, triangle) in reader.enumerate() {
-            let t = triangle.map_err(|e| FormatError::malformed_at(name, MeshFormat::Stl, at(i), e.to_string()))?;
-            if let Some(v) = t.vertices.iter().find(|v| v.0.iter().any(|c| !c.is_finite())) {
+            let t = triangle.map_err(|e| {
+                FormatError::malformed_at(name, MeshFormat::Stl, at(i), e.to_string())
+            })?;
+            if let Some(v) = t
+                .vertices
+                .iter()
+                .find(|v| v.0.iter().any(|c| !c.is_finite()))
+            {
                 return Err(FormatError::malformed_at(
                     name,
                     MeshFormat::Stl,
