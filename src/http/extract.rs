@@ -99,12 +99,11 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
 /// message; otherwise the path points at the offending value.
 fn data_error_field(path: &str, message: &str) -> (String, &'static str) {
     let quoted = || message.split('`').nth(1).unwrap_or("").to_owned();
-    let join = |name: String| {
-        if path == "." {
-            name
-        } else {
-            format!("{path}.{name}")
-        }
+    // The path of an unknown field already ends with it; that of a missing one does not.
+    let join = |name: String| match path {
+        "." => name,
+        p if p.rsplit('.').next() == Some(name.as_str()) => p.to_owned(),
+        p => format!("{p}.{name}"),
     };
     if message.starts_with("unknown field") {
         (join(quoted()), "unknown-field")

@@ -87,13 +87,11 @@ pub(super) async fn run(
         ctx.metrics.inc_shapes_generated();
         tracing::debug!(index, done, "shape committed");
     }
-    if db::cohort_metrics::get(&ctx.pool, cohort.cohort_id)
+    let has_metrics = db::cohort_metrics::get(&ctx.pool, cohort.cohort_id)
         .await?
-        .is_none()
-    {
-        if let Err(e) = compute_metrics(ctx, &cohort).await {
-            return Ok(RunOutcome::Failed(format!("pairwise metrics: {e:#}")));
-        }
+        .is_some();
+    if !has_metrics && let Err(e) = compute_metrics(ctx, &cohort).await {
+        return Ok(RunOutcome::Failed(format!("pairwise metrics: {e:#}")));
     }
     Ok(RunOutcome::Succeeded)
 }

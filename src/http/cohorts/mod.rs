@@ -64,14 +64,16 @@ async fn create_cohort(
     let fingerprint = req.fingerprint();
 
     let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
-    if let Some(key) = key.as_deref() {
-        if let Some(existing) = db::cohorts::find_by_idempotency_key(&mut tx, key).await? {
-            if existing.request_hash != fingerprint {
-                let msg = "was already used with a different request body";
-                return Err(ApiError::invalid("Idempotency-Key", "reused-key", msg));
-            }
-            return Ok(accepted(existing, true));
+    let existing = match key.as_deref() {
+        Some(key) => db::cohorts::find_by_idempotency_key(&mut tx, key).await?,
+        None => None,
+    };
+    if let Some(existing) = existing {
+        if existing.request_hash != fingerprint {
+            let msg = "was already used with a different request body";
+            return Err(ApiError::invalid("Idempotency-Key", "reused-key", msg));
         }
+        return Ok(accepted(existing, true));
     }
     let pending = db::jobs::count_pending(&mut *tx).await?;
     if pending >= state.config.max_queue {
