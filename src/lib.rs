@@ -5,12 +5,18 @@
 //! above it, and the command line (and later the HTTP service) on top.
 
 pub mod cli;
+pub mod config;
+pub mod db;
 pub mod extract;
 pub mod formats;
 pub mod geometry;
+pub mod http;
+pub mod jobs;
 pub mod render;
 pub mod sdf;
+pub mod startup;
 pub mod synth;
+pub mod telemetry;
 
 /// Software version recorded in every artefact's provenance.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -7,6 +7,7 @@ pub mod generate;
 pub mod mesh;
 pub mod progress;
 pub mod render;
+pub mod serve;
 pub mod synth;
 pub mod train;
 
@@ -34,6 +35,8 @@ pub enum Command {
     Generate(generate::GenerateArgs),
     /// Report a mesh file's counts, area, volume, closedness and extent; convert formats.
     Mesh(mesh::MeshArgs),
+    /// Run the cohort service: REST API and job workers on a SQLite database.
+    Serve(serve::ServeArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -46,5 +49,6 @@ pub fn run() -> anyhow::Result<()> {
         Command::Evaluate(args) => evaluate::run(args),
         Command::Generate(args) => generate::run(args),
         Command::Mesh(args) => mesh::run(args),
+        Command::Serve(args) => serve::run(args),
     }
 }

@@ -12,4 +12,4 @@ pub mod sampling;
 #[cfg(test)]
 pub(crate) mod test_shapes;
 
-pub use mesh::{Aabb, EdgeReport, MeshError, TriMesh};
+pub use mesh::{Aabb, EdgeReport, MeshError, TriMesh, cross, dot, norm, normalized, sub};

@@ -1,0 +1,270 @@
+//! The `job` table: a small durable queue. Enqueue inside the caller's transaction, claim
+//! the oldest queued row atomically, record progress and the final state.
+
+use serde::Serialize;
+use sqlx::{SqliteConnection, SqlitePool};
+
+/// A job row as the API reports it.
+#[derive(Debug, Clone, Serialize, sqlx::FromRow)]
+pub struct JobRow {
+    /// Primary key.
+    pub job_id: i64,
+    /// `cohort` or `training`.
+    pub kind: String,
+    /// JSON payload.
+    pub payload: String,
+    /// queued | running | succeeded | failed | cancelled.
+    pub status: String,
+    /// How many times a worker claimed it.
+    pub attempts: i64,
+    /// Units of work done.
+    pub progress_done: i64,
+    /// Units of work in total.
+    pub progress_total: i64,
+    /// Whether a cancel was requested.
+    pub cancel_requested: bool,
+    /// The last error chain.
+    pub error: Option<String>,
+    /// When it was enqueued.
+    pub created_at: String,
+    /// When a worker first claimed it.
+    pub started_at: Option<String>,
+    /// When it reached a final state.
+    pub finished_at: Option<String>,
+}
+
+/// A job a worker has just claimed.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct ClaimedJob {
+    /// Primary key.
+    pub job_id: i64,
+    /// `cohort` or `training`.
+    pub kind: String,
+    /// JSON payload.
+    pub payload: String,
+    /// Claims so far, this one included.
+    pub attempts: i64,
+}
+
+/// The final states a worker can record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FinalStatus {
+    /// All work done.
+    Succeeded,
+    /// Gave up with an error.
+    Failed,
+    /// Stopped on request.
+    Cancelled,
+}
+
+impl FinalStatus {
+    /// The `status` column value.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Succeeded => "succeeded",
+            Self::Failed => "failed",
+            Self::Cancelled => "cancelled",
+        }
+    }
+}
+
+/// Adds a queued job inside the caller's transaction and returns its id.
+pub async fn enqueue(
+    conn: &mut SqliteConnection,
+    kind: &str,
+    payload: &serde_json::Value,
+    progress_total: i64,
+) -> sqlx::Result<i64> {
+    sqlx::query_scalar(
+        "insert into job (kind, payload, progress_total) values (?, ?, ?) returning job_id",
+    )
+    .bind(kind)
+    .bind(payload.to_string())
+    .bind(progress_total)
+    .fetch_one(conn)
+    .await
+}
+
+/// Atomically marks the oldest queued job as running and returns it (None when idle).
+/// One statement, so two workers can never claim the same row.
+pub async fn claim_next(pool: &SqlitePool) -> sqlx::Result<Option<ClaimedJob>> {
+    sqlx::query_as(
+        "update job set status = 'running', attempts = attempts + 1,
+             started_at = coalesce(started_at, strftime('%Y-%m-%dT%H:%M:%fZ', 'now')),
+             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = (select job_id from job where status = 'queued' order by job_id limit 1)
+         returning job_id, kind, payload, attempts",
+    )
+    .fetch_optional(pool)
+    .await
+}
+
+/// At startup: jobs left `running` by a stopped process go back to the queue, except those
+/// already claimed `max_attempts` times, which fail (a job that keeps killing the process
+/// must not loop forever). Returns (re-queued, failed).
+pub async fn requeue_interrupted(pool: &SqlitePool, max_attempts: i64) -> sqlx::Result<(u64, u64)> {
+    let failed = sqlx::query(
+        "update job set status = 'failed', cancel_requested = 0,
+             error = 'interrupted ' || attempts || ' times while running; not retried again',
+             finished_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now'),
+             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where status = 'running' and attempts >= ?",
+    )
+    .bind(max_attempts)
+    .execute(pool)
+    .await?
+    .rows_affected();
+    let requeued = sqlx::query(
+        "update job set status = case when cancel_requested = 1 then 'cancelled' else 'queued' end,
+             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where status = 'running'",
+    )
+    .execute(pool)
+    .await?
+    .rows_affected();
+    Ok((requeued, failed))
+}
+
+/// Puts a running job back in the queue (graceful shutdown in the middle of it).
+pub async fn release(pool: &SqlitePool, job_id: i64) -> sqlx::Result<()> {
+    sqlx::query(
+        "update job set status = 'queued', updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = ? and status = 'running'",
+    )
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    Ok(())
+}
+
+/// Records a running job's final state.
+pub async fn finish(
+    pool: &SqlitePool,
+    job_id: i64,
+    status: FinalStatus,
+    error: Option<&str>,
+) -> sqlx::Result<()> {
+    sqlx::query(
+        "update job set status = ?, error = ?,
+             finished_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now'),
+             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = ?",
+    )
+    .bind(status.as_str())
+    .bind(error)
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    Ok(())
+}
+
+/// Sets the progress counters (inside the transaction that committed the unit of work).
+pub async fn set_progress(conn: &mut SqliteConnection, job_id: i64, done: i64) -> sqlx::Result<()> {
+    sqlx::query(
+        "update job set progress_done = ?, updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = ?",
+    )
+    .bind(done)
+    .bind(job_id)
+    .execute(conn)
+    .await?;
+    Ok(())
+}
+
+/// What a cancel request did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CancelOutcome {
+    /// The job was still queued and is now cancelled.
+    CancelledWhileQueued,
+    /// The job is running; its worker will stop at the next check.
+    Requested,
+    /// The job had already reached a final state.
+    AlreadyFinished,
+}
+
+/// Cancels a queued job at once, or flags a running one for its worker.
+pub async fn request_cancel(pool: &SqlitePool, job_id: i64) -> sqlx::Result<CancelOutcome> {
+    let queued = sqlx::query(
+        "update job set status = 'cancelled', cancel_requested = 1,
+             finished_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now'),
+             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = ? and status = 'queued'",
+    )
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    if queued.rows_affected() == 1 {
+        return Ok(CancelOutcome::CancelledWhileQueued);
+    }
+    let running = sqlx::query(
+        "update job set cancel_requested = 1, updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = ? and status = 'running'",
+    )
+    .bind(job_id)
+    .execute(pool)
+    .await?;
+    Ok(if running.rows_affected() == 1 {
+        CancelOutcome::Requested
+    } else {
+        CancelOutcome::AlreadyFinished
+    })
+}
+
+/// Whether a cancel was requested for the job (checked by workers between units of work).
+pub async fn is_cancel_requested(pool: &SqlitePool, job_id: i64) -> sqlx::Result<bool> {
+    let flag: Option<bool> =
+        sqlx::query_scalar("select cancel_requested from job where job_id = ?")
+            .bind(job_id)
+            .fetch_optional(pool)
+            .await?;
+    Ok(flag.unwrap_or(true))
+}
+
+/// One job by id.
+pub async fn get(pool: &SqlitePool, job_id: i64) -> sqlx::Result<Option<JobRow>> {
+    sqlx::query_as(
+        "select job_id, kind, payload, status, attempts, progress_done, progress_total,
+                cancel_requested, error, created_at, started_at, finished_at
+         from job where job_id = ?",
+    )
+    .bind(job_id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// Jobs waiting or running: the queue length that bounds new submissions.
+pub async fn count_pending<'e>(ex: impl sqlx::SqliteExecutor<'e>) -> sqlx::Result<i64> {
+    sqlx::query_scalar("select count(*) from job where status in ('queued', 'running')")
+        .fetch_one(ex)
+        .await
+}
+
+/// Replaces a job's payload (inside the transaction that created its subject).
+pub async fn set_payload(
+    conn: &mut SqliteConnection,
+    job_id: i64,
+    payload: &serde_json::Value,
+) -> sqlx::Result<()> {
+    sqlx::query("update job set payload = ? where job_id = ?")
+        .bind(payload.to_string())
+        .bind(job_id)
+        .execute(conn)
+        .await?;
+    Ok(())
+}
+
+/// Number of jobs in each state (for /metrics).
+pub async fn count_by_status(pool: &SqlitePool) -> sqlx::Result<Vec<(String, i64)>> {
+    sqlx::query_as("select status, count(*) from job group by status order by status")
+        .fetch_all(pool)
+        .await
+}
+
+/// Deletes a job row (after its cohort was deleted).
+pub async fn delete(conn: &mut SqliteConnection, job_id: i64) -> sqlx::Result<()> {
+    sqlx::query("delete from job where job_id = ?")
+        .bind(job_id)
+        .execute(conn)
+        .await?;
+    Ok(())
+}

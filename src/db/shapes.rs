@@ -1,0 +1,233 @@
+//! The `shape` table: generated shapes with provenance, measures and the stored mesh.
+
+use sqlx::{SqliteConnection, SqlitePool};
+
+/// A shape to commit (with its mesh blob) in the job's per-shape transaction.
+#[derive(Debug, Clone)]
+pub struct NewShape<'a> {
+    /// Owning cohort.
+    pub cohort_id: i64,
+    /// Position within the cohort.
+    pub shape_index: i64,
+    /// Training shapes mixed.
+    pub training_indices: &'a [usize],
+    /// Their weights.
+    pub weights: &'a [f64],
+    /// Per-shape seed.
+    pub seed: i64,
+    /// Marching-cubes resolution.
+    pub resolution: i64,
+    /// Crate version that generated it.
+    pub software_version: &'a str,
+    /// Vertex count.
+    pub vertex_count: i64,
+    /// Triangle count.
+    pub triangle_count: i64,
+    /// Surface area in mm².
+    pub area_mm2: f64,
+    /// Enclosed volume in mm³.
+    pub volume_mm3: f64,
+    /// Unit-ball → mm centre.
+    pub centre: [f64; 3],
+    /// Unit-ball → mm scale.
+    pub radius: f64,
+    /// Encoded unit-ball mesh ([`super::mesh_blob`]).
+    pub mesh: &'a [u8],
+    /// Hex SHA-256 of `mesh`.
+    pub mesh_sha256: &'a str,
+}
+
+/// A shape's metadata (everything but the mesh bytes).
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct ShapeRow {
+    /// Primary key.
+    pub shape_id: i64,
+    /// Owning cohort.
+    pub cohort_id: i64,
+    /// Model of the owning cohort.
+    pub model_id: String,
+    /// Position within the cohort.
+    pub shape_index: i64,
+    /// JSON array of training indices.
+    pub training_indices: String,
+    /// JSON array of weights.
+    pub weights: String,
+    /// Per-shape seed.
+    pub seed: i64,
+    /// Resolution.
+    pub resolution: i64,
+    /// Generating crate version.
+    pub software_version: String,
+    /// Vertex count.
+    pub vertex_count: i64,
+    /// Triangle count.
+    pub triangle_count: i64,
+    /// Area in mm².
+    pub area_mm2: f64,
+    /// Volume in mm³.
+    pub volume_mm3: f64,
+    /// Transform centre x.
+    pub centre_x: f64,
+    /// Transform centre y.
+    pub centre_y: f64,
+    /// Transform centre z.
+    pub centre_z: f64,
+    /// Transform scale.
+    pub radius: f64,
+    /// Hex SHA-256 of the stored mesh.
+    pub mesh_sha256: String,
+    /// Commit time.
+    pub created_at: String,
+}
+
+/// A shape's stored mesh and the transform to mm.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct StoredMesh {
+    /// Shape id.
+    pub shape_id: i64,
+    /// Encoded unit-ball mesh.
+    pub mesh: Vec<u8>,
+    /// Hex SHA-256 of `mesh`.
+    pub mesh_sha256: String,
+    /// Transform centre x.
+    pub centre_x: f64,
+    /// Transform centre y.
+    pub centre_y: f64,
+    /// Transform centre z.
+    pub centre_z: f64,
+    /// Transform scale.
+    pub radius: f64,
+}
+
+const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
+        s.training_indices, s.weights, s.seed, s.resolution, s.software_version,
+        s.vertex_count, s.triangle_count, s.area_mm2, s.volume_mm3,
+        s.centre_x, s.centre_y, s.centre_z, s.radius, s.mesh_sha256, s.created_at
+    from shape s join cohort c on c.cohort_id = s.cohort_id";
+
+/// Inserts a shape inside the caller's transaction.
+pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Result<i64> {
+    let indices = serde_json::to_string(s.training_indices).expect("integers serialise");
+    let weights = serde_json::to_string(s.weights).expect("finite floats serialise");
+    sqlx::query_scalar(
+        "insert into shape (cohort_id, shape_index, training_indices, weights, seed, resolution,
+             software_version, vertex_count, triangle_count, area_mm2, volume_mm3,
+             centre_x, centre_y, centre_z, radius, mesh, mesh_sha256)
+         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) returning shape_id",
+    )
+    .bind(s.cohort_id)
+    .bind(s.shape_index)
+    .bind(indices)
+    .bind(weights)
+    .bind(s.seed)
+    .bind(s.resolution)
+    .bind(s.software_version)
+    .bind(s.vertex_count)
+    .bind(s.triangle_count)
+    .bind(s.area_mm2)
+    .bind(s.volume_mm3)
+    .bind(s.centre[0])
+    .bind(s.centre[1])
+    .bind(s.centre[2])
+    .bind(s.radius)
+    .bind(s.mesh)
+    .bind(s.mesh_sha256)
+    .fetch_one(conn)
+    .await
+}
+
+/// Shape indices already committed for a cohort (a resumed job skips them).
+pub async fn existing_indices(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar("select shape_index from shape where cohort_id = ? order by shape_index")
+        .bind(cohort_id)
+        .fetch_all(pool)
+        .await
+}
+
+/// A page of a cohort's shapes in index order.
+pub async fn list_for_cohort(
+    pool: &SqlitePool,
+    cohort_id: i64,
+    limit: i64,
+    offset: i64,
+) -> sqlx::Result<Vec<ShapeRow>> {
+    let sql = sqlx::AssertSqlSafe(format!(
+        "{SELECT} where s.cohort_id = ? order by s.shape_index limit ? offset ?"
+    ));
+    sqlx::query_as(sql)
+        .bind(cohort_id)
+        .bind(limit)
+        .bind(offset)
+        .fetch_all(pool)
+        .await
+}
+
+/// One shape's metadata.
+pub async fn get(pool: &SqlitePool, shape_id: i64) -> sqlx::Result<Option<ShapeRow>> {
+    let sql = sqlx::AssertSqlSafe(format!("{SELECT} where s.shape_id = ?"));
+    sqlx::query_as(sql)
+        .bind(shape_id)
+        .fetch_optional(pool)
+        .await
+}
+
+/// One shape's mesh bytes and transform.
+pub async fn get_mesh(pool: &SqlitePool, shape_id: i64) -> sqlx::Result<Option<StoredMesh>> {
+    sqlx::query_as(
+        "select shape_id, mesh, mesh_sha256, centre_x, centre_y, centre_z, radius
+         from shape where shape_id = ?",
+    )
+    .bind(shape_id)
+    .fetch_optional(pool)
+    .await
+}
+
+/// All of a cohort's meshes in index order (for the pairwise metrics).
+pub async fn cohort_meshes(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<StoredMesh>> {
+    sqlx::query_as(
+        "select shape_id, mesh, mesh_sha256, centre_x, centre_y, centre_z, radius
+         from shape where cohort_id = ? order by shape_index",
+    )
+    .bind(cohort_id)
+    .fetch_all(pool)
+    .await
+}
+
+/// Mean, min and max of area and volume over a cohort's shapes.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct MeasureSummary {
+    /// Shapes counted.
+    pub n: i64,
+    /// Mean area (mm²).
+    pub area_mean: Option<f64>,
+    /// Smallest area.
+    pub area_min: Option<f64>,
+    /// Largest area.
+    pub area_max: Option<f64>,
+    /// Mean volume (mm³).
+    pub volume_mean: Option<f64>,
+    /// Smallest volume.
+    pub volume_min: Option<f64>,
+    /// Largest volume.
+    pub volume_max: Option<f64>,
+}
+
+/// Summary of the cohort's committed shapes.
+pub async fn measure_summary(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<MeasureSummary> {
+    sqlx::query_as(
+        "select count(*) as n, avg(area_mm2) as area_mean, min(area_mm2) as area_min,
+             max(area_mm2) as area_max, avg(volume_mm3) as volume_mean,
+             min(volume_mm3) as volume_min, max(volume_mm3) as volume_max
+         from shape where cohort_id = ?",
+    )
+    .bind(cohort_id)
+    .fetch_one(pool)
+    .await
+}
+
+/// Total shapes stored (for /metrics).
+pub async fn count_all(pool: &SqlitePool) -> sqlx::Result<i64> {
+    sqlx::query_scalar("select count(*) from shape")
+        .fetch_one(pool)
+        .await
+}

@@ -1,0 +1,225 @@
+//! Cohort request and response bodies, and the request rules of DESIGN §4.
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::db::cohorts::CohortRow;
+use crate::db::shapes::MeasureSummary;
+use crate::http::error::ApiError;
+use crate::http::jobs::Progress;
+use crate::jobs::engine::ModelInfo;
+use crate::jobs::plan::{Weighting, check_weights};
+use crate::jobs::stats::PairwiseSummary;
+
+/// Default marching-cubes resolution (the paper's 256³).
+pub const DEFAULT_RESOLUTION: i64 = 256;
+/// Smallest and largest accepted resolution.
+pub const RESOLUTION_RANGE: (i64, i64) = (32, 1024);
+
+/// Body of `POST /v1/cohorts`.
+#[derive(Debug, Clone, Deserialize, Serialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateCohort {
+    /// Model to sample from (see `GET /v1/models`).
+    pub model_id: String,
+    /// Number of shapes, 1 to the configured maximum.
+    pub count: i64,
+    /// Training shapes mixed per generated shape: 2 ≤ arity ≤ training shapes.
+    pub arity: i64,
+    /// Explicit weights (length = arity, each ≥ 0, summing to 1 within 1e-6), used for every
+    /// shape; when absent, `weighting` draws them.
+    #[serde(default)]
+    pub weights: Option<Vec<f64>>,
+    /// Weight strategy when `weights` is absent (default `dirichlet`).
+    #[serde(default)]
+    pub weighting: Option<Weighting>,
+    /// Seed; a fixed seed reproduces the cohort bit for bit. Drawn and recorded when absent.
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// Marching-cubes resolution per axis, 32–1024 (default 256).
+    #[serde(default)]
+    pub resolution: Option<i64>,
+}
+
+impl CreateCohort {
+    /// Rules that need no database: ranges and the weights' own consistency.
+    pub fn check_shape(&self, max_count: u32) -> Result<(), ApiError> {
+        if !(1..=i64::from(max_count)).contains(&self.count) {
+            let msg = format!("must be between 1 and {max_count}, got {}", self.count);
+            return Err(ApiError::invalid("count", "range", msg));
+        }
+        if self.arity < 2 {
+            let msg = format!("must be at least 2, got {}", self.arity);
+            return Err(ApiError::invalid("arity", "range", msg));
+        }
+        let (lo, hi) = RESOLUTION_RANGE;
+        if let Some(r) = self.resolution.filter(|r| !(lo..=hi).contains(r)) {
+            let msg = format!("must be between {lo} and {hi}, got {r}");
+            return Err(ApiError::invalid("resolution", "range", msg));
+        }
+        if let Some(w) = &self.weights {
+            check_weights(w, self.arity as usize).map_err(|m| weights_error(&m))?;
+        }
+        Ok(())
+    }
+
+    /// Rules against the model: arity within its training shapes.
+    pub fn check_against(&self, info: &ModelInfo) -> Result<(), ApiError> {
+        let n = info.training_shape_count() as i64;
+        if self.arity > n {
+            let msg = format!(
+                "must not exceed the model's {n} training shapes, got {}",
+                self.arity
+            );
+            return Err(ApiError::invalid("arity", "range", msg));
+        }
+        Ok(())
+    }
+
+    /// SHA-256 over the canonical request, to recognise a retried POST.
+    pub fn fingerprint(&self) -> String {
+        let canonical = serde_json::to_vec(self).expect("requests serialise");
+        crate::jobs::cohort::hex(&Sha256::digest(canonical))
+    }
+}
+
+fn weights_error(message: &str) -> ApiError {
+    let rule = if message.contains("entries") {
+        "length"
+    } else if message.contains("finite") {
+        "finite"
+    } else if message.contains("negative") {
+        "non-negative"
+    } else {
+        "sum"
+    };
+    ApiError::invalid("weights", rule, message)
+}
+
+/// A cohort as the API shows it.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct CohortView {
+    /// Cohort id.
+    pub id: i64,
+    /// Model drawn from.
+    pub model_id: String,
+    /// queued | running | succeeded | failed | cancelled.
+    pub status: String,
+    /// Shapes stored / requested.
+    pub progress: Progress,
+    /// Number of shapes requested.
+    pub count: i64,
+    /// Training shapes mixed per shape.
+    pub arity: i64,
+    /// Weight strategy used when `weights` is null.
+    pub weighting: Weighting,
+    /// Explicit weights, if given.
+    pub weights: Option<Vec<f64>>,
+    /// The seed used (replay with the same request and this seed).
+    pub seed: u64,
+    /// Marching-cubes resolution.
+    pub resolution: i64,
+    /// The job generating it.
+    pub job_id: i64,
+    /// Error chain when failed.
+    pub error: Option<String>,
+    /// Creation time (UTC, RFC 3339).
+    pub created_at: String,
+    /// When generation started.
+    pub started_at: Option<String>,
+    /// When generation ended.
+    pub finished_at: Option<String>,
+    /// Related resources.
+    pub links: CohortLinks,
+    /// Statistics over the stored shapes (single-cohort reads only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub summary: Option<CohortSummary>,
+}
+
+/// URLs of a cohort's related resources.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct CohortLinks {
+    /// This cohort.
+    #[serde(rename = "self")]
+    pub this: String,
+    /// Its job.
+    pub job: String,
+    /// Its shapes.
+    pub shapes: String,
+    /// Its pairwise metrics.
+    pub metrics: String,
+}
+
+/// Summary statistics of a cohort.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct CohortSummary {
+    /// Surface area over stored shapes (mm²).
+    pub area_mm2: Option<Range>,
+    /// Enclosed volume over stored shapes (mm³).
+    pub volume_mm3: Option<Range>,
+    /// Pairwise Chamfer distances (squared, unit-ball coordinates), once computed.
+    pub pairwise_chamfer: Option<PairwiseSummary>,
+}
+
+/// Mean and extremes.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct Range {
+    /// Mean.
+    pub mean: f64,
+    /// Minimum.
+    pub min: f64,
+    /// Maximum.
+    pub max: f64,
+}
+
+impl CohortView {
+    /// Builds the view of a stored cohort (without summary).
+    pub fn from_row(c: CohortRow) -> Self {
+        let id = c.cohort_id;
+        Self {
+            id,
+            model_id: c.model_id,
+            status: c.status,
+            progress: Progress {
+                done: c.shapes_done,
+                total: c.count,
+            },
+            count: c.count,
+            arity: c.arity,
+            weighting: Weighting::parse(&c.weighting).unwrap_or(Weighting::Dirichlet),
+            weights: c.weights.and_then(|w| serde_json::from_str(&w).ok()),
+            seed: c.seed as u64,
+            resolution: c.resolution,
+            job_id: c.job_id,
+            error: c.error,
+            created_at: c.created_at,
+            started_at: c.started_at,
+            finished_at: c.finished_at,
+            links: CohortLinks {
+                this: format!("/v1/cohorts/{id}"),
+                job: format!("/v1/jobs/{}", c.job_id),
+                shapes: format!("/v1/cohorts/{id}/shapes"),
+                metrics: format!("/v1/cohorts/{id}/metrics"),
+            },
+            summary: None,
+        }
+    }
+}
+
+impl CohortSummary {
+    /// Combines the measure summary and the stored pairwise summary.
+    pub fn new(m: &MeasureSummary, pairwise: Option<PairwiseSummary>) -> Self {
+        let range = |mean: Option<f64>, min: Option<f64>, max: Option<f64>| {
+            Some(Range {
+                mean: mean?,
+                min: min?,
+                max: max?,
+            })
+        };
+        Self {
+            area_mm2: range(m.area_mean, m.area_min, m.area_max),
+            volume_mm3: range(m.volume_mean, m.volume_min, m.volume_max),
+            pairwise_chamfer: pairwise,
+        }
+    }
+}

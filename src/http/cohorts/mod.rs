@@ -1,0 +1,299 @@
+//! `/v1/cohorts`: request a cohort (a queued job), follow it, cancel or delete it.
+
+pub mod dto;
+pub mod metrics;
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::AppState;
+use super::error::{ApiError, Problem, Result};
+use super::extract::{ApiJson, ApiQuery, parse_id};
+use crate::db::{self, cohorts::CohortRow, jobs::CancelOutcome};
+use crate::jobs::cohort::CohortPayload;
+use crate::jobs::engine::ModelInfo;
+use crate::jobs::plan::Weighting;
+use dto::{CohortSummary, CohortView, CreateCohort, DEFAULT_RESOLUTION};
+
+/// Header that makes a retried POST return the cohort of the first attempt.
+pub const IDEMPOTENCY_KEY: &str = "idempotency-key";
+
+pub(super) fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(create_cohort, list_cohorts))
+        .routes(routes!(get_cohort, delete_cohort))
+        .routes(routes!(cancel_cohort))
+        .routes(routes!(metrics::get_cohort_metrics))
+}
+
+/// Requests a cohort; generation runs as a background job.
+#[utoipa::path(post, path = "/v1/cohorts", tag = "cohorts",
+    request_body = CreateCohort,
+    params(("Idempotency-Key" = Option<String>, Header, description = "Retry key: the same key and body return the same cohort")),
+    responses(
+        (status = 202, body = CohortView, description = "Accepted; `Location` names the cohort"),
+        (status = 400, body = Problem, content_type = "application/problem+json"),
+        (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown model"),
+        (status = 415, body = Problem, content_type = "application/problem+json"),
+        (status = 422, body = Problem, content_type = "application/problem+json"),
+        (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After"),
+    ))]
+async fn create_cohort(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ApiJson(req): ApiJson<CreateCohort>,
+) -> Result<Response> {
+    let key = idempotency_key(&headers)?;
+    req.check_shape(state.config.max_count)?;
+    let model = db::models::get(&state.pool, &req.model_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("model", &req.model_id))?;
+    if model.status != "ready" {
+        return Err(ApiError::Conflict(format!(
+            "model {:?} is {}, not ready",
+            model.model_id, model.status
+        )));
+    }
+    let info: ModelInfo = serde_json::from_str(&model.manifest)
+        .map_err(|e| anyhow::anyhow!("model {} has a bad manifest: {e}", model.model_id))?;
+    req.check_against(&info)?;
+    let fingerprint = req.fingerprint();
+
+    let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
+    let existing = match key.as_deref() {
+        Some(key) => db::cohorts::find_by_idempotency_key(&mut tx, key).await?,
+        None => None,
+    };
+    if let Some(existing) = existing {
+        if existing.request_hash != fingerprint {
+            let msg = "was already used with a different request body";
+            return Err(ApiError::invalid("Idempotency-Key", "reused-key", msg));
+        }
+        return Ok(accepted(existing, true));
+    }
+    let pending = db::jobs::count_pending(&mut *tx).await?;
+    if pending >= state.config.max_queue {
+        return Err(ApiError::QueueFull {
+            pending,
+            retry_after: state.config.retry_after_secs,
+        });
+    }
+    let job_id = db::jobs::enqueue(&mut tx, "cohort", &serde_json::json!({}), req.count).await?;
+    let seed = req.seed.unwrap_or_else(rand::random::<u64>);
+    let weighting = req.weighting.unwrap_or(Weighting::Dirichlet);
+    let cohort_id = db::cohorts::insert(
+        &mut tx,
+        &db::cohorts::NewCohort {
+            model_id: &req.model_id,
+            job_id,
+            count: req.count,
+            arity: req.arity,
+            weighting: weighting.as_str(),
+            weights: req.weights.as_deref(),
+            seed: seed as i64,
+            resolution: req.resolution.unwrap_or(DEFAULT_RESOLUTION),
+            idempotency_key: key.as_deref(),
+            request_hash: &fingerprint,
+        },
+    )
+    .await?;
+    let payload = serde_json::to_value(CohortPayload { cohort_id }).map_err(anyhow::Error::from)?;
+    db::jobs::set_payload(&mut tx, job_id, &payload).await?;
+    tx.commit().await?;
+    state.job_wake.notify_one();
+    tracing::info!(cohort_id, job_id, count = req.count, "cohort queued");
+
+    let cohort = load(&state, cohort_id, &cohort_id.to_string()).await?;
+    Ok(accepted(cohort, false))
+}
+
+fn accepted(cohort: CohortRow, replayed: bool) -> Response {
+    let location = format!("/v1/cohorts/{}", cohort.cohort_id);
+    let mut response = (
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, location)],
+        Json(CohortView::from_row(cohort)),
+    )
+        .into_response();
+    if replayed {
+        response
+            .headers_mut()
+            .insert("idempotent-replayed", "true".parse().expect("valid header"));
+    }
+    response
+}
+
+fn idempotency_key(headers: &HeaderMap) -> Result<Option<String>> {
+    let Some(value) = headers.get(IDEMPOTENCY_KEY) else {
+        return Ok(None);
+    };
+    let key = value.to_str().unwrap_or("").trim();
+    if key.is_empty() || key.len() > 255 {
+        let msg = "must be 1 to 255 visible ASCII characters";
+        return Err(ApiError::invalid("Idempotency-Key", "format", msg));
+    }
+    Ok(Some(key.to_owned()))
+}
+
+/// Filters and page of `GET /v1/cohorts`.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct CohortFilter {
+    /// Only cohorts of this model.
+    pub model_id: Option<String>,
+    /// Only cohorts in this state (queued, running, succeeded, failed, cancelled).
+    pub status: Option<String>,
+    /// Page size, 1–100 (default 20).
+    pub limit: Option<i64>,
+    /// Items to skip (default 0).
+    pub offset: Option<i64>,
+}
+
+/// A page of cohorts.
+#[derive(Debug, serde::Serialize, utoipa::ToSchema)]
+pub struct CohortPage {
+    /// The cohorts, newest first.
+    pub items: Vec<CohortView>,
+    /// Offset of the next page, when there may be one.
+    pub next_offset: Option<i64>,
+}
+
+/// Lists cohorts, newest first.
+#[utoipa::path(get, path = "/v1/cohorts", tag = "cohorts", params(CohortFilter),
+    responses((status = 200, body = CohortPage),
+              (status = 400, body = Problem, content_type = "application/problem+json")))]
+async fn list_cohorts(
+    State(state): State<AppState>,
+    ApiQuery(f): ApiQuery<CohortFilter>,
+) -> Result<Json<CohortPage>> {
+    const STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "cancelled"];
+    if let Some(s) = f.status.as_deref().filter(|s| !STATES.contains(s)) {
+        let message = format!("status must be one of {}, got {s:?}", STATES.join(", "));
+        return Err(ApiError::BadRequest {
+            field: Some("status".into()),
+            message,
+        });
+    }
+    let (limit, offset) = page(f.limit, f.offset)?;
+    let rows = db::cohorts::list(
+        &state.pool,
+        f.model_id.as_deref(),
+        f.status.as_deref(),
+        limit,
+        offset,
+    )
+    .await?;
+    let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
+    Ok(Json(CohortPage {
+        items: rows.into_iter().map(CohortView::from_row).collect(),
+        next_offset,
+    }))
+}
+
+/// Validates paging parameters (shared with the shapes listing).
+pub fn page(limit: Option<i64>, offset: Option<i64>) -> Result<(i64, i64)> {
+    let limit = limit.unwrap_or(20);
+    if !(1..=100).contains(&limit) {
+        let message = format!("limit must be between 1 and 100, got {limit}");
+        return Err(ApiError::BadRequest {
+            field: Some("limit".into()),
+            message,
+        });
+    }
+    let offset = offset.unwrap_or(0);
+    if offset < 0 {
+        let message = format!("offset must not be negative, got {offset}");
+        return Err(ApiError::BadRequest {
+            field: Some("offset".into()),
+            message,
+        });
+    }
+    Ok((limit, offset))
+}
+
+/// One cohort: state, progress and summary statistics.
+#[utoipa::path(get, path = "/v1/cohorts/{id}", tag = "cohorts",
+    params(("id" = i64, Path, description = "Cohort id")),
+    responses((status = 200, body = CohortView),
+              (status = 404, body = Problem, content_type = "application/problem+json")))]
+async fn get_cohort(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<CohortView>> {
+    let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
+    let measures = db::shapes::measure_summary(&state.pool, cohort.cohort_id).await?;
+    let pairwise = match db::cohort_metrics::get(&state.pool, cohort.cohort_id).await? {
+        Some(m) => serde_json::from_str(&m.summary).map_err(anyhow::Error::from)?,
+        None => None,
+    };
+    let mut view = CohortView::from_row(cohort);
+    view.summary = Some(CohortSummary::new(&measures, pairwise));
+    Ok(Json(view))
+}
+
+/// Stops a cohort: a queued one at once, a running one within seconds; finished shapes stay.
+#[utoipa::path(post, path = "/v1/cohorts/{id}/cancel", tag = "cohorts",
+    params(("id" = i64, Path, description = "Cohort id")),
+    responses((status = 202, body = CohortView, description = "Cancelled or cancellation under way"),
+              (status = 404, body = Problem, content_type = "application/problem+json"),
+              (status = 409, body = Problem, content_type = "application/problem+json", description = "Already finished")))]
+async fn cancel_cohort(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<impl IntoResponse> {
+    let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
+    match db::jobs::request_cancel(&state.pool, cohort.job_id).await? {
+        CancelOutcome::AlreadyFinished => {
+            return Err(ApiError::Conflict(format!(
+                "cohort {id} has already {}",
+                cohort.status
+            )));
+        }
+        CancelOutcome::Requested => {
+            state.jobs.controls.interrupt(cohort.job_id);
+        }
+        CancelOutcome::CancelledWhileQueued => {}
+    }
+    let cohort = load(&state, cohort.cohort_id, &id).await?;
+    Ok((StatusCode::ACCEPTED, Json(CohortView::from_row(cohort))))
+}
+
+/// Deletes a cohort with its shapes and metrics; a running cohort must be cancelled first.
+#[utoipa::path(delete, path = "/v1/cohorts/{id}", tag = "cohorts",
+    params(("id" = i64, Path, description = "Cohort id")),
+    responses((status = 204, description = "Deleted"),
+              (status = 404, body = Problem, content_type = "application/problem+json"),
+              (status = 409, body = Problem, content_type = "application/problem+json", description = "Still running")))]
+async fn delete_cohort(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<StatusCode> {
+    let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
+    if cohort.status == "running" {
+        let msg = format!("cohort {id} is running; cancel it first (POST /v1/cohorts/{id}/cancel)");
+        return Err(ApiError::Conflict(msg));
+    }
+    // A queued cohort is cancelled first so no worker claims it while it is deleted.
+    if db::jobs::request_cancel(&state.pool, cohort.job_id).await? == CancelOutcome::Requested {
+        state.jobs.controls.interrupt(cohort.job_id);
+        let msg =
+            format!("cohort {id} started running; it is being cancelled, delete it afterwards");
+        return Err(ApiError::Conflict(msg));
+    }
+    let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
+    db::cohorts::delete(&mut tx, cohort.cohort_id).await?;
+    db::jobs::delete(&mut tx, cohort.job_id).await?;
+    tx.commit().await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Loads a cohort or answers 404.
+pub(super) async fn load(state: &AppState, cohort_id: i64, raw: &str) -> Result<CohortRow> {
+    db::cohorts::get(&state.pool, cohort_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("cohort", raw))
+}

@@ -1,0 +1,214 @@
+//! The API's error type and its RFC 9457 `application/problem+json` rendering. Every 4xx
+//! names the field (or parameter) and the rule; 5xx details are logged, not sent.
+
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+
+/// Result alias for handlers.
+pub type Result<T, E = ApiError> = std::result::Result<T, E>;
+
+/// Everything a handler can answer other than success.
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    /// An id that does not exist (404).
+    #[error("{what} {id:?} does not exist")]
+    NotFound {
+        /// Kind of resource.
+        what: &'static str,
+        /// The id as requested.
+        id: String,
+    },
+    /// A well-formed request that breaks a rule (422).
+    #[error("{field}: {message}")]
+    Validation {
+        /// JSON path or header of the offending value.
+        field: String,
+        /// Short rule name (`range`, `length`, `sum`, `unknown-field`, …).
+        rule: &'static str,
+        /// Human sentence.
+        message: String,
+    },
+    /// A request the server cannot interpret (400).
+    #[error("{message}")]
+    BadRequest {
+        /// The query parameter or field, if one is to blame.
+        field: Option<String>,
+        /// Human sentence.
+        message: String,
+    },
+    /// A body that is not valid JSON (400), with the position of the first error.
+    #[error("malformed JSON at line {line}, column {column}: {message}")]
+    MalformedJson {
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// Parser message.
+        message: String,
+    },
+    /// A body in a media type the endpoint does not take (415).
+    #[error("expected a body of type {expected}, got {got}")]
+    UnsupportedMediaType {
+        /// Accepted type.
+        expected: &'static str,
+        /// What the Content-Type header said.
+        got: String,
+    },
+    /// A body over the configured limit (413).
+    #[error("the request body exceeds the limit of {limit} bytes")]
+    PayloadTooLarge {
+        /// The limit.
+        limit: usize,
+    },
+    /// The resource's state forbids the operation (409).
+    #[error("{0}")]
+    Conflict(String),
+    /// The job queue is full (429 + Retry-After).
+    #[error("the job queue is full ({pending} jobs waiting or running); retry in {retry_after} s")]
+    QueueFull {
+        /// Jobs queued or running.
+        pending: i64,
+        /// Seconds to wait.
+        retry_after: u64,
+    },
+    /// A dependency is down (503).
+    #[error("{0}")]
+    Unavailable(String),
+    /// The database failed (500).
+    #[error("database error")]
+    Database(#[from] sqlx::Error),
+    /// Anything else unexpected (500).
+    #[error("internal error")]
+    Internal(#[from] anyhow::Error),
+}
+
+/// An RFC 9457 problem document, extended with the offending field and rule.
+#[derive(Debug, Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct Problem {
+    /// Problem type URI (relative to the service).
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Short summary of the problem type.
+    pub title: String,
+    /// HTTP status code.
+    pub status: u16,
+    /// Human-readable explanation of this occurrence.
+    pub detail: String,
+    /// The field, header or parameter at fault.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// The rule that failed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rule: Option<String>,
+    /// Line of a JSON syntax error.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<usize>,
+    /// Column of a JSON syntax error.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub column: Option<usize>,
+}
+
+impl ApiError {
+    /// Shorthand for a 422 naming the field and the rule.
+    pub fn invalid(
+        field: impl Into<String>,
+        rule: &'static str,
+        message: impl Into<String>,
+    ) -> Self {
+        Self::Validation {
+            field: field.into(),
+            rule,
+            message: message.into(),
+        }
+    }
+
+    /// Shorthand for a 404.
+    pub fn not_found(what: &'static str, id: impl ToString) -> Self {
+        Self::NotFound {
+            what,
+            id: id.to_string(),
+        }
+    }
+
+    /// The HTTP status this error maps to.
+    pub fn status_code(&self) -> StatusCode {
+        match self {
+            Self::NotFound { .. } => StatusCode::NOT_FOUND,
+            Self::Validation { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            Self::BadRequest { .. } | Self::MalformedJson { .. } => StatusCode::BAD_REQUEST,
+            Self::UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            Self::PayloadTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            Self::Conflict(_) => StatusCode::CONFLICT,
+            Self::QueueFull { .. } => StatusCode::TOO_MANY_REQUESTS,
+            Self::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            Self::Database(_) | Self::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    fn slug(&self) -> &'static str {
+        match self {
+            Self::NotFound { .. } => "not-found",
+            Self::Validation { .. } => "validation-error",
+            Self::BadRequest { .. } => "bad-request",
+            Self::MalformedJson { .. } => "malformed-json",
+            Self::UnsupportedMediaType { .. } => "unsupported-media-type",
+            Self::PayloadTooLarge { .. } => "payload-too-large",
+            Self::Conflict(_) => "conflict",
+            Self::QueueFull { .. } => "queue-full",
+            Self::Unavailable(_) => "unavailable",
+            Self::Database(_) | Self::Internal(_) => "internal-error",
+        }
+    }
+
+    /// The problem document for this error.
+    pub fn to_problem(&self) -> Problem {
+        let status = self.status_code();
+        let mut p = Problem {
+            kind: format!("/problems/{}", self.slug()),
+            title: status.canonical_reason().unwrap_or("Error").to_owned(),
+            status: status.as_u16(),
+            detail: self.to_string(),
+            field: None,
+            rule: None,
+            line: None,
+            column: None,
+        };
+        match self {
+            Self::Validation { field, rule, .. } => {
+                p.field = Some(field.clone());
+                p.rule = Some((*rule).to_owned());
+            }
+            Self::BadRequest { field, .. } => p.field = field.clone(),
+            Self::MalformedJson { line, column, .. } => {
+                (p.line, p.column) = (Some(*line), Some(*column))
+            }
+            _ => {}
+        }
+        p
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        if self.status_code().is_server_error() {
+            let cause = match &self {
+                Self::Database(e) => format!("{e}"),
+                Self::Internal(e) => format!("{e:#}"),
+                _ => self.to_string(),
+            };
+            tracing::error!(error = %cause, "request failed");
+        }
+        let body = serde_json::to_vec(&self.to_problem()).expect("problems serialise");
+        let mut response = (self.status_code(), body).into_response();
+        let headers = response.headers_mut();
+        headers.insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("application/problem+json"),
+        );
+        if let Self::QueueFull { retry_after, .. } = self {
+            headers.insert(header::RETRY_AFTER, HeaderValue::from(retry_after));
+        }
+        response
+    }
+}

@@ -1,0 +1,91 @@
+//! `GET /v1/jobs/{id}`: the state of background work.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use serde::Serialize;
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::AppState;
+use super::error::{ApiError, Problem, Result};
+use super::extract::parse_id;
+use crate::db::{self, jobs::JobRow};
+
+/// A job as the API shows it.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct JobView {
+    /// Job id.
+    pub id: i64,
+    /// `cohort` or `training`.
+    pub kind: String,
+    /// queued | running | succeeded | failed | cancelled.
+    pub status: String,
+    /// Units of work done and in total (shapes for a cohort).
+    pub progress: Progress,
+    /// Times a worker claimed the job (more than 1 after restarts).
+    pub attempts: i64,
+    /// Whether cancellation was requested.
+    pub cancel_requested: bool,
+    /// Enqueue time (UTC, RFC 3339).
+    pub created_at: String,
+    /// First start.
+    pub started_at: Option<String>,
+    /// End.
+    pub finished_at: Option<String>,
+    /// Error chain when failed.
+    pub error: Option<String>,
+    /// The resource the job works on.
+    pub subject: Option<String>,
+}
+
+/// Done / total.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct Progress {
+    /// Units done.
+    pub done: i64,
+    /// Units in total.
+    pub total: i64,
+}
+
+impl From<JobRow> for JobView {
+    fn from(j: JobRow) -> Self {
+        let payload: serde_json::Value = serde_json::from_str(&j.payload).unwrap_or_default();
+        let subject = match (payload.get("cohort_id"), payload.get("model_id")) {
+            (Some(c), _) => Some(format!("/v1/cohorts/{c}")),
+            (None, Some(serde_json::Value::String(m))) => Some(format!("/v1/models/{m}")),
+            _ => None,
+        };
+        Self {
+            id: j.job_id,
+            kind: j.kind,
+            status: j.status,
+            progress: Progress {
+                done: j.progress_done,
+                total: j.progress_total,
+            },
+            attempts: j.attempts,
+            cancel_requested: j.cancel_requested,
+            created_at: j.created_at,
+            started_at: j.started_at,
+            finished_at: j.finished_at,
+            error: j.error,
+            subject,
+        }
+    }
+}
+
+pub(super) fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new().routes(routes!(get_job))
+}
+
+/// One job: kind, state, progress, timings, error text when failed.
+#[utoipa::path(get, path = "/v1/jobs/{id}", tag = "jobs",
+    params(("id" = i64, Path, description = "Job id")),
+    responses((status = 200, body = JobView),
+              (status = 404, body = Problem, content_type = "application/problem+json")))]
+async fn get_job(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<JobView>> {
+    let job_id = parse_id("job", &id)?;
+    let job = db::jobs::get(&state.pool, job_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("job", &id))?;
+    Ok(Json(job.into()))
+}

@@ -1,0 +1,285 @@
+//! Generated shapes: listing per cohort, provenance, and mesh downloads converted on the fly
+//! from the stored unit-ball mesh to the requested format and units.
+
+use axum::Json;
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use serde::{Deserialize, Serialize};
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::AppState;
+use super::cohorts::{load as load_cohort, page};
+use super::error::{ApiError, Problem, Result};
+use super::extract::{ApiQuery, parse_id};
+use crate::db::{self, mesh_blob, shapes::ShapeRow};
+use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
+use crate::geometry::normalize::UnitBallTransform;
+use crate::telemetry::spawn_blocking_with_span;
+
+/// A generated shape with its provenance.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct ShapeView {
+    /// Shape id.
+    pub id: i64,
+    /// Owning cohort.
+    pub cohort_id: i64,
+    /// Position within the cohort (0-based).
+    pub index: i64,
+    /// How it was made.
+    pub provenance: Provenance,
+    /// Vertex count.
+    pub vertex_count: i64,
+    /// Triangle count.
+    pub triangle_count: i64,
+    /// Surface area (mm²).
+    pub area_mm2: f64,
+    /// Enclosed volume (mm³).
+    pub volume_mm3: f64,
+    /// Units of downloads by default.
+    pub units: &'static str,
+    /// Unit ball → mm: p_mm = p_unit · radius + centre.
+    pub transform: Transform,
+    /// Sign and orientation conventions.
+    pub conventions: &'static str,
+    /// Download URL (add `?format=` and `&units=`).
+    pub mesh_url: String,
+}
+
+/// The model, training shapes, weights, seed and resolution a shape came from.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct Provenance {
+    /// Model id.
+    pub model_id: String,
+    /// Training shapes mixed.
+    pub training_indices: Vec<usize>,
+    /// Their weights.
+    pub weights: Vec<f64>,
+    /// Per-shape seed.
+    pub seed: u64,
+    /// Marching-cubes resolution.
+    pub resolution: i64,
+    /// aortagen version.
+    pub software_version: String,
+}
+
+/// A unit-ball transform.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct Transform {
+    /// Centre in mm.
+    pub centre: [f64; 3],
+    /// Scale in mm per unit.
+    pub radius: f64,
+}
+
+const CONVENTIONS: &str = "triangles counter-clockwise seen from outside (outward normals); \
+    signed distance negative inside";
+
+impl ShapeView {
+    fn from_row(s: ShapeRow) -> Result<Self> {
+        Ok(Self {
+            id: s.shape_id,
+            cohort_id: s.cohort_id,
+            index: s.shape_index,
+            provenance: Provenance {
+                model_id: s.model_id,
+                training_indices: parse_json(&s.training_indices)?,
+                weights: parse_json(&s.weights)?,
+                seed: s.seed as u64,
+                resolution: s.resolution,
+                software_version: s.software_version,
+            },
+            vertex_count: s.vertex_count,
+            triangle_count: s.triangle_count,
+            area_mm2: s.area_mm2,
+            volume_mm3: s.volume_mm3,
+            units: "mm",
+            transform: Transform {
+                centre: [s.centre_x, s.centre_y, s.centre_z],
+                radius: s.radius,
+            },
+            conventions: CONVENTIONS,
+            mesh_url: format!("/v1/shapes/{}/mesh", s.shape_id),
+        })
+    }
+}
+
+pub(super) fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(list_cohort_shapes))
+        .routes(routes!(get_shape))
+        .routes(routes!(get_shape_mesh))
+}
+
+/// Page parameters.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct PageQuery {
+    /// Page size, 1–100 (default 20).
+    pub limit: Option<i64>,
+    /// Items to skip (default 0).
+    pub offset: Option<i64>,
+}
+
+/// A page of shapes.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct ShapePage {
+    /// Shapes in index order.
+    pub items: Vec<ShapeView>,
+    /// Offset of the next page, when there may be one.
+    pub next_offset: Option<i64>,
+}
+
+/// The cohort's stored shapes in index order.
+#[utoipa::path(get, path = "/v1/cohorts/{id}/shapes", tag = "shapes",
+    params(("id" = i64, Path, description = "Cohort id"), PageQuery),
+    responses((status = 200, body = ShapePage),
+              (status = 404, body = Problem, content_type = "application/problem+json")))]
+async fn list_cohort_shapes(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    ApiQuery(q): ApiQuery<PageQuery>,
+) -> Result<Json<ShapePage>> {
+    let cohort = load_cohort(&state, parse_id("cohort", &id)?, &id).await?;
+    let (limit, offset) = page(q.limit, q.offset)?;
+    let rows = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, limit, offset).await?;
+    let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
+    let items = rows
+        .into_iter()
+        .map(ShapeView::from_row)
+        .collect::<Result<_>>()?;
+    Ok(Json(ShapePage { items, next_offset }))
+}
+
+/// One shape: provenance, counts, area, volume, units.
+#[utoipa::path(get, path = "/v1/shapes/{id}", tag = "shapes",
+    params(("id" = i64, Path, description = "Shape id")),
+    responses((status = 200, body = ShapeView),
+              (status = 404, body = Problem, content_type = "application/problem+json")))]
+async fn get_shape(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<ShapeView>> {
+    let row = db::shapes::get(&state.pool, parse_id("shape", &id)?)
+        .await?
+        .ok_or_else(|| ApiError::not_found("shape", &id))?;
+    Ok(Json(ShapeView::from_row(row)?))
+}
+
+/// Download options.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct MeshQuery {
+    /// glb (default), gltf, stl, obj or ply.
+    pub format: Option<String>,
+    /// mm (default) or unit (the shape's unit ball).
+    pub units: Option<String>,
+}
+
+/// The shape's mesh. Content never changes for a shape id: strong ETag, immutable caching.
+#[utoipa::path(get, path = "/v1/shapes/{id}/mesh", tag = "shapes",
+    params(("id" = i64, Path, description = "Shape id"), MeshQuery),
+    responses((status = 200, description = "The mesh (model/gltf-binary by default)", content_type = "model/gltf-binary"),
+              (status = 304, description = "Matches If-None-Match"),
+              (status = 400, body = Problem, content_type = "application/problem+json", description = "Unknown format or units"),
+              (status = 404, body = Problem, content_type = "application/problem+json")))]
+async fn get_shape_mesh(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+    ApiQuery(q): ApiQuery<MeshQuery>,
+    headers: HeaderMap,
+) -> Result<Response> {
+    let format: MeshFormat = match q.format.as_deref() {
+        None => MeshFormat::Glb,
+        Some(f) => f.parse().map_err(|_| ApiError::BadRequest {
+            field: Some("format".into()),
+            message: format!("unknown mesh format {f:?}; use glb, gltf, stl, obj or ply"),
+        })?,
+    };
+    let units = match q.units.as_deref() {
+        None | Some("mm") => "mm",
+        Some("unit") => "unit",
+        Some(u) => {
+            let message = format!("unknown units {u:?}; use mm or unit");
+            return Err(ApiError::BadRequest {
+                field: Some("units".into()),
+                message,
+            });
+        }
+    };
+    let shape_id = parse_id("shape", &id)?;
+    let shape = db::shapes::get(&state.pool, shape_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("shape", &id))?;
+    let etag = format!(
+        "\"{}-{}-{units}\"",
+        &shape.mesh_sha256[..32],
+        format.extension()
+    );
+    let cache = [
+        (header::ETAG, etag.clone()),
+        (header::CACHE_CONTROL, CACHE_FOREVER.to_owned()),
+    ];
+    if if_none_match(&headers, &etag) {
+        return Ok((StatusCode::NOT_MODIFIED, cache).into_response());
+    }
+    let stored = db::shapes::get_mesh(&state.pool, shape_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("shape", &id))?;
+    let view = ShapeView::from_row(shape)?;
+    let meta = MeshMetadata {
+        units: units.to_owned(),
+        generator: format!("aortagen {}", crate::VERSION),
+        extras: serde_json::json!({ "shape_id": view.id, "cohort_id": view.cohort_id,
+            "index": view.index, "provenance": view.provenance }),
+    };
+    let bytes = spawn_blocking_with_span(move || -> anyhow::Result<Vec<u8>> {
+        let unit = mesh_blob::decode(&stored.mesh)?;
+        let transform = UnitBallTransform {
+            centre: [stored.centre_x, stored.centre_y, stored.centre_z],
+            radius: stored.radius,
+        };
+        let mesh = if units == "mm" {
+            transform.mesh_to_mesh_units(&unit)
+        } else {
+            unit
+        };
+        Ok(write_mesh(&mesh, format, &meta)?)
+    })
+    .await
+    .map_err(anyhow::Error::from)??;
+    let disposition = format!(
+        "attachment; filename=\"shape-{shape_id}.{}\"",
+        format.extension()
+    );
+    let headers = [
+        (header::CONTENT_TYPE, content_type(format).to_owned()),
+        (header::CONTENT_DISPOSITION, disposition),
+    ];
+    Ok((cache, headers, bytes).into_response())
+}
+
+fn parse_json<T: serde::de::DeserializeOwned>(json: &str) -> Result<T> {
+    Ok(serde_json::from_str(json).map_err(anyhow::Error::from)?)
+}
+
+const CACHE_FOREVER: &str = "public, max-age=31536000, immutable";
+
+fn content_type(format: MeshFormat) -> &'static str {
+    match format {
+        MeshFormat::Glb => "model/gltf-binary",
+        MeshFormat::Gltf => "model/gltf+json",
+        MeshFormat::Stl => "model/stl",
+        MeshFormat::Obj => "model/obj",
+        MeshFormat::Ply => "application/x-ply",
+    }
+}
+
+fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
+    headers
+        .get_all(header::IF_NONE_MATCH)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(','))
+        .any(|t| t.trim() == etag || t.trim() == "*")
+}

@@ -1,0 +1,192 @@
+//! The cohort job: generates the shapes not yet stored, one transaction per shape, then the
+//! pairwise Chamfer metrics. Re-running it after an interruption continues where it stopped.
+
+use std::collections::HashSet;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::engine::{GeneratedShape, ModelInfo, ShapeSpec};
+use super::plan::{CohortPlan, Weighting};
+use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
+use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
+use crate::telemetry::spawn_blocking_with_span;
+
+/// The payload of a `cohort` job.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CohortPayload {
+    /// The cohort to generate.
+    pub cohort_id: i64,
+}
+
+/// The plan a stored cohort describes.
+pub fn plan_for(cohort: &CohortRow, info: &ModelInfo) -> anyhow::Result<CohortPlan> {
+    let weights = match &cohort.weights {
+        Some(json) => Some(serde_json::from_str(json).context("stored weights are not JSON")?),
+        None => None,
+    };
+    Ok(CohortPlan {
+        training_shapes: info.training_shape_count(),
+        arity: cohort.arity as usize,
+        weights,
+        weighting: Weighting::parse(&cohort.weighting).context("stored weighting is unknown")?,
+        seed: cohort.seed as u64,
+        resolution: cohort.resolution as usize,
+    })
+}
+
+pub(super) async fn run(
+    ctx: &JobContext,
+    job: &ClaimedJob,
+    flag: &Arc<AtomicBool>,
+) -> anyhow::Result<RunOutcome> {
+    let payload: CohortPayload = serde_json::from_str(&job.payload).context("bad job payload")?;
+    let cohort = db::cohorts::get(&ctx.pool, payload.cohort_id)
+        .await?
+        .with_context(|| format!("cohort {} no longer exists", payload.cohort_id))?;
+    tracing::Span::current().record("cohort_id", cohort.cohort_id);
+    let model = db::models::get(&ctx.pool, &cohort.model_id)
+        .await?
+        .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
+    let info: ModelInfo = serde_json::from_str(&model.manifest).context("bad model manifest")?;
+    let plan = plan_for(&cohort, &info)?;
+    let model_dir = PathBuf::from(&model.dir_path);
+
+    let stored: HashSet<i64> = db::shapes::existing_indices(&ctx.pool, cohort.cohort_id)
+        .await?
+        .into_iter()
+        .collect();
+    let mut done = stored.len() as i64;
+    if done > 0 {
+        tracing::info!(done, "resuming cohort");
+    }
+    for index in (0..cohort.count).filter(|i| !stored.contains(i)) {
+        if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
+            return Ok(stop);
+        }
+        let spec = plan.shape_spec(index as u64);
+        let generated = generate(ctx, model_dir.clone(), spec.clone(), flag.clone()).await;
+        let (shape, blob, sha) = match generated {
+            Ok(g) => g,
+            Err(e) => {
+                if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
+                    return Ok(stop);
+                }
+                return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}")));
+            }
+        };
+        done += 1;
+        commit_shape(
+            ctx, job.job_id, &cohort, index, &spec, &shape, &blob, &sha, done,
+        )
+        .await?;
+        ctx.metrics.inc_shapes_generated();
+        tracing::debug!(index, done, "shape committed");
+    }
+    let has_metrics = db::cohort_metrics::get(&ctx.pool, cohort.cohort_id)
+        .await?
+        .is_some();
+    if !has_metrics && let Err(e) = compute_metrics(ctx, &cohort).await {
+        return Ok(RunOutcome::Failed(format!("pairwise metrics: {e:#}")));
+    }
+    Ok(RunOutcome::Succeeded)
+}
+
+/// Generates and encodes one shape off the executor.
+async fn generate(
+    ctx: &JobContext,
+    model_dir: PathBuf,
+    spec: ShapeSpec,
+    flag: Arc<AtomicBool>,
+) -> anyhow::Result<(GeneratedShape, Vec<u8>, String)> {
+    let engine = ctx.engine.clone();
+    spawn_blocking_with_span(move || {
+        let shape = engine.generate_shape(&model_dir, &spec, &flag)?;
+        shape
+            .mesh_unit
+            .validate()
+            .context("engine returned an invalid mesh")?;
+        let blob = mesh_blob::encode(&shape.mesh_unit);
+        let sha = hex(&Sha256::digest(&blob));
+        Ok((shape, blob, sha))
+    })
+    .await
+    .map_err(join_error)?
+}
+
+/// Stores one shape and the job's progress in a single transaction.
+#[allow(clippy::too_many_arguments)]
+async fn commit_shape(
+    ctx: &JobContext,
+    job_id: i64,
+    cohort: &CohortRow,
+    index: i64,
+    spec: &ShapeSpec,
+    shape: &GeneratedShape,
+    blob: &[u8],
+    sha: &str,
+    done: i64,
+) -> anyhow::Result<()> {
+    let row = db::shapes::NewShape {
+        cohort_id: cohort.cohort_id,
+        shape_index: index,
+        training_indices: &spec.training_indices,
+        weights: &spec.weights,
+        seed: spec.seed as i64,
+        resolution: spec.resolution as i64,
+        software_version: crate::VERSION,
+        vertex_count: shape.mesh_unit.vertex_count() as i64,
+        triangle_count: shape.mesh_unit.triangle_count() as i64,
+        area_mm2: shape.area_mm2,
+        volume_mm3: shape.volume_mm3,
+        centre: shape.transform.centre,
+        radius: shape.transform.radius,
+        mesh: blob,
+        mesh_sha256: sha,
+    };
+    let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
+    db::shapes::insert(&mut tx, &row)
+        .await
+        .with_context(|| format!("cannot store shape {index}"))?;
+    db::jobs::set_progress(&mut tx, job_id, done).await?;
+    tx.commit().await.context("cannot commit shape")?;
+    Ok(())
+}
+
+/// Pairwise Chamfer distances over the stored unit-ball meshes, summarised and stored.
+async fn compute_metrics(ctx: &JobContext, cohort: &CohortRow) -> anyhow::Result<()> {
+    let stored = db::shapes::cohort_meshes(&ctx.pool, cohort.cohort_id).await?;
+    let engine = ctx.engine.clone();
+    let seed = cohort.seed as u64;
+    let matrix = spawn_blocking_with_span(move || -> anyhow::Result<Vec<Vec<f64>>> {
+        let meshes = stored
+            .iter()
+            .map(|s| mesh_blob::decode(&s.mesh).with_context(|| format!("shape {}", s.shape_id)))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let matrix = engine.pairwise_chamfer(&meshes, seed)?;
+        let n = meshes.len();
+        anyhow::ensure!(
+            matrix.len() == n && matrix.iter().all(|r| r.len() == n),
+            "engine returned a matrix that is not {n}×{n}"
+        );
+        anyhow::ensure!(
+            matrix.iter().flatten().all(|v| v.is_finite()),
+            "non-finite distance"
+        );
+        Ok(matrix)
+    })
+    .await
+    .map_err(join_error)??;
+    let summary = serde_json::to_value(stats::summarize(&matrix))?;
+    db::cohort_metrics::upsert(&ctx.pool, cohort.cohort_id, &matrix, &summary).await?;
+    Ok(())
+}
+
+/// Lower-case hexadecimal.
+pub fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}

@@ -1,0 +1,135 @@
+//! What the job worker needs from the science engine. The service depends only on this
+//! trait, so the model, extraction and metrics code plug in behind it and tests can run
+//! the whole service on an analytic stand-in.
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::TriMesh;
+use crate::geometry::normalize::UnitBallTransform;
+
+/// Facts about a registered model, reported by the engine and stored as its manifest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelInfo {
+    /// Latent code dimension d.
+    pub latent_dim: usize,
+    /// Free-form description of the network (layers, width, activation …).
+    pub architecture: serde_json::Value,
+    /// The training shapes, in latent order.
+    pub training_shapes: Vec<TrainingShapeInfo>,
+}
+
+impl ModelInfo {
+    /// Number of training shapes (the upper bound of a cohort's arity).
+    pub fn training_shape_count(&self) -> usize {
+        self.training_shapes.len()
+    }
+}
+
+/// One training shape of a model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainingShapeInfo {
+    /// Index of its latent vector.
+    pub index: usize,
+    /// Source file name or label.
+    pub name: String,
+    /// Chamfer distance of its reconstruction to the original (unit-ball coordinates), if
+    /// measured.
+    pub reconstruction_cd: Option<f64>,
+}
+
+/// What to generate: a convex combination of training latents.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ShapeSpec {
+    /// Training shapes mixed (distinct, length = arity).
+    pub training_indices: Vec<usize>,
+    /// Their weights (non-negative, summing to 1).
+    pub weights: Vec<f64>,
+    /// Seed for any randomness inside generation.
+    pub seed: u64,
+    /// Marching-cubes grid resolution per axis.
+    pub resolution: usize,
+}
+
+/// One generated shape.
+#[derive(Debug, Clone)]
+pub struct GeneratedShape {
+    /// The mesh in unit-ball coordinates (what is stored).
+    pub mesh_unit: TriMesh,
+    /// Unit ball → millimetres.
+    pub transform: UnitBallTransform,
+    /// Surface area in mm².
+    pub area_mm2: f64,
+    /// Enclosed volume in mm³.
+    pub volume_mm3: f64,
+}
+
+/// A model-training request: meshes already written to `input_dir`, weights to go to
+/// `model_dir`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainingSpec {
+    /// Directory holding the uploaded mesh files.
+    pub input_dir: std::path::PathBuf,
+    /// Directory to write the trained model into.
+    pub model_dir: std::path::PathBuf,
+    /// Seed for initialisation and sampling.
+    pub seed: u64,
+}
+
+/// The science engine, as the job worker calls it. Every method is blocking CPU work and is
+/// called inside `spawn_blocking`.
+pub trait CohortEngine: Send + Sync + 'static {
+    /// Facts about the model stored in `model_dir` (used for validation and the API).
+    fn model_info(&self, model_dir: &Path) -> anyhow::Result<ModelInfo>;
+
+    /// Generates one shape. Returns early with an error once `cancel` becomes true.
+    fn generate_shape(
+        &self,
+        model_dir: &Path,
+        spec: &ShapeSpec,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<GeneratedShape>;
+
+    /// Pairwise Chamfer distance matrix (unit-ball coordinates) over a cohort's meshes.
+    fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>>;
+
+    /// Trains a model from the meshes in `spec.input_dir`, writes it to `spec.model_dir`
+    /// and reports its facts. Returns early with an error once `cancel` becomes true.
+    fn train_model(&self, spec: &TrainingSpec, cancel: &AtomicBool) -> anyhow::Result<ModelInfo>;
+}
+
+/// An engine that refuses every call: what the service runs on when no science engine is
+/// linked in. Jobs fail with a clear message instead of the service refusing to start.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct UnavailableEngine;
+
+impl UnavailableEngine {
+    fn refuse<T>(&self) -> anyhow::Result<T> {
+        anyhow::bail!("no science engine is linked into this build of aortagen")
+    }
+}
+
+impl CohortEngine for UnavailableEngine {
+    fn model_info(&self, _: &Path) -> anyhow::Result<ModelInfo> {
+        self.refuse()
+    }
+
+    fn generate_shape(
+        &self,
+        _: &Path,
+        _: &ShapeSpec,
+        _: &AtomicBool,
+    ) -> anyhow::Result<GeneratedShape> {
+        self.refuse()
+    }
+
+    fn pairwise_chamfer(&self, _: &[TriMesh], _: u64) -> anyhow::Result<Vec<Vec<f64>>> {
+        self.refuse()
+    }
+
+    fn train_model(&self, _: &TrainingSpec, _: &AtomicBool) -> anyhow::Result<ModelInfo> {
+        self.refuse()
+    }
+}

@@ -1,0 +1,208 @@
+//! Background work: a durable queue in the `job` table, workers that claim and run jobs,
+//! and the job kinds (cohort generation, model training). Heavy work goes to
+//! `spawn_blocking`; a panic there fails the job, never the worker.
+
+pub mod cohort;
+pub mod engine;
+pub mod plan;
+pub mod stats;
+pub mod training;
+pub mod worker;
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use anyhow::anyhow;
+use sqlx::SqlitePool;
+use tracing::Instrument;
+
+use crate::db;
+use crate::telemetry::ServiceMetrics;
+use engine::CohortEngine;
+
+/// What a worker needs to run jobs.
+#[derive(Clone)]
+pub struct JobContext {
+    /// The database.
+    pub pool: SqlitePool,
+    /// The science engine.
+    pub engine: Arc<dyn CohortEngine>,
+    /// Interrupt flags of the jobs running in this process.
+    pub controls: JobControls,
+    /// Counters for /metrics.
+    pub metrics: Arc<ServiceMetrics>,
+    /// Where trained models are written.
+    pub models_dir: PathBuf,
+}
+
+/// Interrupt flags of running jobs, shared by the workers (which pass them to the engine)
+/// and the API (cancel) and the shutdown path.
+#[derive(Clone, Default)]
+pub struct JobControls {
+    running: Arc<Mutex<HashMap<i64, Arc<AtomicBool>>>>,
+    shutting_down: Arc<AtomicBool>,
+}
+
+impl JobControls {
+    fn register(&self, job_id: i64) -> Arc<AtomicBool> {
+        let flag = Arc::new(AtomicBool::new(self.is_shutting_down()));
+        self.lock().insert(job_id, flag.clone());
+        flag
+    }
+
+    fn unregister(&self, job_id: i64) {
+        self.lock().remove(&job_id);
+    }
+
+    /// Raises the interrupt flag of a job running in this process; false if it is not.
+    pub fn interrupt(&self, job_id: i64) -> bool {
+        self.lock()
+            .get(&job_id)
+            .map(|f| f.store(true, Ordering::SeqCst))
+            .is_some()
+    }
+
+    /// Interrupts every running job and makes new claims stop at once; interrupted jobs go
+    /// back to the queue with their finished work kept.
+    pub fn shut_down(&self) {
+        self.shutting_down.store(true, Ordering::SeqCst);
+        for flag in self.lock().values() {
+            flag.store(true, Ordering::SeqCst);
+        }
+    }
+
+    /// Whether [`Self::shut_down`] was called.
+    pub fn is_shutting_down(&self) -> bool {
+        self.shutting_down.load(Ordering::SeqCst)
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<i64, Arc<AtomicBool>>> {
+        self.running.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// How a job run ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum RunOutcome {
+    /// Everything done.
+    Succeeded,
+    /// Stopped by a cancel request; finished work kept.
+    Cancelled,
+    /// Stopped by shutdown; back in the queue to resume later.
+    Released,
+    /// Gave up; the message is the error chain.
+    Failed(String),
+}
+
+impl RunOutcome {
+    fn label(&self) -> &'static str {
+        match self {
+            Self::Succeeded => "succeeded",
+            Self::Cancelled => "cancelled",
+            Self::Released => "released",
+            Self::Failed(_) => "failed",
+        }
+    }
+}
+
+/// Result of one attempt to take work from the queue.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ExecutionOutcome {
+    /// A job was claimed and run to one of its outcomes.
+    TaskCompleted {
+        /// The job.
+        job_id: i64,
+        /// How it ended.
+        outcome: RunOutcome,
+    },
+    /// Nothing was queued.
+    EmptyQueue,
+}
+
+/// Claims the oldest queued job, runs it and records its final state.
+pub async fn try_execute_job(ctx: &JobContext) -> anyhow::Result<ExecutionOutcome> {
+    let Some(job) = db::jobs::claim_next(&ctx.pool).await? else {
+        return Ok(ExecutionOutcome::EmptyQueue);
+    };
+    let span = tracing::info_span!(
+        "job",
+        job_id = job.job_id,
+        kind = %job.kind,
+        attempt = job.attempts,
+        cohort_id = tracing::field::Empty,
+        model_id = tracing::field::Empty,
+    );
+    execute(ctx, job).instrument(span).await
+}
+
+async fn execute(ctx: &JobContext, job: db::jobs::ClaimedJob) -> anyhow::Result<ExecutionOutcome> {
+    tracing::info!("job started");
+    let flag = ctx.controls.register(job.job_id);
+    let started = Instant::now();
+    let result = match job.kind.as_str() {
+        "cohort" => cohort::run(ctx, &job, &flag).await,
+        "training" => training::run(ctx, &job, &flag).await,
+        other => Err(anyhow!("unknown job kind {other:?}")),
+    };
+    ctx.controls.unregister(job.job_id);
+    let outcome = result.unwrap_or_else(|e| RunOutcome::Failed(format!("{e:#}")));
+    use db::jobs::FinalStatus;
+    match &outcome {
+        RunOutcome::Succeeded => {
+            db::jobs::finish(&ctx.pool, job.job_id, FinalStatus::Succeeded, None).await?
+        }
+        RunOutcome::Cancelled => {
+            db::jobs::finish(&ctx.pool, job.job_id, FinalStatus::Cancelled, None).await?
+        }
+        RunOutcome::Failed(e) => {
+            tracing::error!(error = %e, "job failed");
+            db::jobs::finish(&ctx.pool, job.job_id, FinalStatus::Failed, Some(e)).await?
+        }
+        RunOutcome::Released => db::jobs::release(&ctx.pool, job.job_id).await?,
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    ctx.metrics.observe_job(&job.kind, outcome.label(), seconds);
+    tracing::info!(outcome = outcome.label(), seconds, "job ended");
+    Ok(ExecutionOutcome::TaskCompleted {
+        job_id: job.job_id,
+        outcome,
+    })
+}
+
+/// Decides how an interrupted job ends: a cancel request wins over shutdown.
+async fn stop_outcome(
+    ctx: &JobContext,
+    job_id: i64,
+    flag: &AtomicBool,
+) -> anyhow::Result<Option<RunOutcome>> {
+    let cancelled = db::jobs::is_cancel_requested(&ctx.pool, job_id).await?;
+    if cancelled {
+        return Ok(Some(RunOutcome::Cancelled));
+    }
+    if flag.load(Ordering::SeqCst) {
+        return Ok(Some(if ctx.controls.is_shutting_down() {
+            RunOutcome::Released
+        } else {
+            RunOutcome::Cancelled
+        }));
+    }
+    Ok(None)
+}
+
+/// Turns a failed `spawn_blocking` (a panic inside the engine) into an error.
+fn join_error(e: tokio::task::JoinError) -> anyhow::Error {
+    if e.is_panic() {
+        let panic = e.into_panic();
+        let msg = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "non-string panic payload".into());
+        anyhow!("engine panicked: {msg}")
+    } else {
+        anyhow!("engine task was cancelled")
+    }
+}

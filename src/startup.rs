@@ -1,0 +1,188 @@
+//! The service lifecycle: open and migrate the database, recover interrupted jobs, register
+//! the bundled model, bind, then serve and run workers until a shutdown signal.
+
+use std::future::Future;
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::Context;
+use sqlx::SqlitePool;
+use tokio::net::TcpListener;
+use tokio::sync::{Notify, watch};
+
+use crate::config::Config;
+use crate::db;
+use crate::http::{self, AppState};
+use crate::jobs::engine::CohortEngine;
+use crate::jobs::{JobContext, JobControls, worker};
+use crate::telemetry::ServiceMetrics;
+
+/// Id under which the bundled model is registered.
+pub const DEFAULT_MODEL_ID: &str = "default";
+
+/// A built, bound, not yet running service.
+pub struct Application {
+    listener: TcpListener,
+    state: AppState,
+    port: u16,
+}
+
+impl Application {
+    /// Prepares everything that can fail before serving: database, recovery, model
+    /// registration, listener.
+    pub async fn build(config: Config, engine: Arc<dyn CohortEngine>) -> anyhow::Result<Self> {
+        let workers = config.worker_count();
+        // Workers hold a connection only while committing; requests need a few more.
+        let connections = (2 * workers + 8) as u32;
+        let pool = db::connect(&config.database_url, connections).await?;
+        let (requeued, failed) = db::jobs::requeue_interrupted(&pool, config.max_attempts).await?;
+        if requeued + failed > 0 {
+            tracing::warn!(
+                requeued,
+                failed,
+                "recovered jobs interrupted by a previous stop"
+            );
+        }
+        let bundled = config.models_dir.join(DEFAULT_MODEL_ID);
+        if bundled.is_dir() {
+            if let Err(e) = register_model(&pool, engine.clone(), DEFAULT_MODEL_ID, &bundled).await
+            {
+                tracing::warn!(
+                    error = format!("{e:#}"),
+                    "cannot register the bundled model"
+                );
+            }
+        } else if db::models::get(&pool, DEFAULT_MODEL_ID).await?.is_none() {
+            tracing::warn!(dir = %bundled.display(), "no bundled model found; cohorts need a model registered or trained");
+        }
+        let listener = TcpListener::bind(&config.bind)
+            .await
+            .with_context(|| format!("cannot listen on {}", config.bind))?;
+        let port = listener.local_addr()?.port();
+        let jobs = JobContext {
+            pool: pool.clone(),
+            engine,
+            controls: JobControls::default(),
+            metrics: Arc::new(ServiceMetrics::default()),
+            models_dir: config.models_dir.clone(),
+        };
+        let state = AppState {
+            pool,
+            config: Arc::new(config),
+            jobs,
+            job_wake: Arc::new(Notify::new()),
+        };
+        Ok(Self {
+            listener,
+            state,
+            port,
+        })
+    }
+
+    /// The bound port (useful with port 0).
+    pub fn port(&self) -> u16 {
+        self.port
+    }
+
+    /// Shared state (tests drive jobs through it).
+    pub fn state(&self) -> &AppState {
+        &self.state
+    }
+
+    /// Serves HTTP and runs `workers` job workers until `shutdown` resolves. On shutdown
+    /// the server stops accepting, running jobs are interrupted and re-queued with their
+    /// finished shapes kept, and the call returns once workers and connections are done.
+    pub async fn run_until_stopped(
+        self,
+        workers: usize,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> anyhow::Result<()> {
+        let (stop_tx, stop_rx) = watch::channel(false);
+        let handles: Vec<_> = (0..workers)
+            .map(|i| {
+                let (ctx, wake, stop) = (
+                    self.state.jobs.clone(),
+                    self.state.job_wake.clone(),
+                    stop_rx.clone(),
+                );
+                tokio::spawn(worker::run_worker_until_stopped(i, ctx, wake, stop))
+            })
+            .collect();
+        let controls = self.state.jobs.controls.clone();
+        let app = http::router(self.state.clone());
+        tracing::info!(port = self.port, workers, "listening");
+        let served = axum::serve(self.listener, app)
+            .with_graceful_shutdown(async move {
+                shutdown.await;
+                tracing::info!("shutting down: interrupting running jobs");
+                controls.shut_down();
+                let _ = stop_tx.send(true);
+            })
+            .await;
+        for h in handles {
+            if let Err(e) = h.await {
+                tracing::error!(error = %e, "worker ended abnormally");
+            }
+        }
+        self.state.pool.close().await;
+        served.context("the HTTP server failed")
+    }
+}
+
+/// Registers the model in `dir` under `id` unless that id exists; the engine reads its
+/// facts (off the executor). Returns whether it was newly registered.
+pub async fn register_model(
+    pool: &SqlitePool,
+    engine: Arc<dyn CohortEngine>,
+    id: &str,
+    dir: &Path,
+) -> anyhow::Result<bool> {
+    if db::models::get(pool, id).await?.is_some() {
+        return Ok(false);
+    }
+    let owned = dir.to_path_buf();
+    let info = tokio::task::spawn_blocking(move || engine.model_info(&owned))
+        .await?
+        .with_context(|| format!("cannot read the model in {}", dir.display()))?;
+    let manifest = serde_json::to_value(&info)?;
+    let mut conn = pool.acquire().await?;
+    let inserted =
+        db::models::insert_if_absent(&mut conn, id, &dir.to_string_lossy(), &manifest, "ready")
+            .await?;
+    if inserted {
+        tracing::info!(
+            model_id = id,
+            shapes = info.training_shape_count(),
+            "model registered"
+        );
+    }
+    Ok(inserted)
+}
+
+/// Resolves on Ctrl-C or SIGTERM (what container runtimes send).
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        if let Err(e) = tokio::signal::ctrl_c().await {
+            tracing::error!(error = %e, "cannot listen for Ctrl-C");
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let terminate = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "cannot listen for SIGTERM");
+                std::future::pending::<()>().await;
+            }
+        }
+    };
+    #[cfg(not(unix))]
+    let terminate = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {}
+        _ = terminate => {}
+    }
+}

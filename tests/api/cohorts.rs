@@ -1,0 +1,211 @@
+//! Creating, listing, cancelling and deleting cohorts.
+
+use axum::http::{Method, StatusCode};
+use serde_json::json;
+
+use crate::helpers::{MAX_QUEUE, MODEL, cohort_body, spawn_app};
+use aortagen::jobs::{ExecutionOutcome, RunOutcome};
+
+#[tokio::test]
+async fn create_cohort_answers_202_with_location_and_a_queued_job() {
+    let app = spawn_app().await;
+    let r = app.create_cohort(&cohort_body(3, 2)).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED);
+    let body = r.json();
+    let id = body["id"].as_i64().unwrap();
+    assert_eq!(
+        r.header("location"),
+        Some(format!("/v1/cohorts/{id}").as_str())
+    );
+    assert_eq!(body["status"], "queued");
+    assert_eq!(body["progress"], json!({ "done": 0, "total": 3 }));
+    assert_eq!(
+        (body["seed"].as_u64(), body["resolution"].as_i64()),
+        (Some(7), Some(64))
+    );
+    assert_eq!(body["weighting"], "dirichlet");
+    let status: String = sqlx::query_scalar("select status from job where job_id = ?")
+        .bind(body["job_id"].as_i64())
+        .fetch_one(&app.state.pool)
+        .await
+        .unwrap();
+    assert_eq!(status, "queued");
+}
+
+#[tokio::test]
+async fn a_cohort_runs_to_completion_with_every_shape_and_its_metrics() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(4, 3)).await;
+    let outcomes = app.run_pending_jobs().await;
+    assert!(matches!(
+        &outcomes[..],
+        [ExecutionOutcome::TaskCompleted {
+            outcome: RunOutcome::Succeeded,
+            ..
+        }]
+    ));
+
+    let c = app.get(&format!("/v1/cohorts/{id}")).await.json();
+    assert_eq!(c["status"], "succeeded");
+    assert_eq!(c["progress"], json!({ "done": 4, "total": 4 }));
+    assert!(c["finished_at"].is_string());
+    let area = &c["summary"]["area_mm2"];
+    assert!(area["min"].as_f64().unwrap() <= area["mean"].as_f64().unwrap());
+    assert_eq!(c["summary"]["pairwise_chamfer"]["pairs"], 6);
+    let indices: Vec<i64> =
+        sqlx::query_scalar("select shape_index from shape where cohort_id = ? order by 1")
+            .bind(id)
+            .fetch_all(&app.state.pool)
+            .await
+            .unwrap();
+    assert_eq!(indices, vec![0, 1, 2, 3]);
+}
+
+#[tokio::test]
+async fn the_same_seed_reproduces_the_same_shapes() {
+    let app = spawn_app().await;
+    let a = app.create_cohort_ok(&cohort_body(3, 2)).await;
+    let b = app.create_cohort_ok(&cohort_body(3, 2)).await;
+    let mut other = cohort_body(3, 2);
+    other["seed"] = json!(8);
+    let c = app.create_cohort_ok(&other).await;
+    app.run_pending_jobs().await;
+    let shas = |id: i64| {
+        let pool = app.state.pool.clone();
+        async move {
+            sqlx::query_scalar::<_, String>("select training_indices || weights || mesh_sha256 from shape where cohort_id = ? order by shape_index")
+                .bind(id)
+                .fetch_all(&pool)
+                .await
+                .unwrap()
+        }
+    };
+    assert_eq!(shas(a).await, shas(b).await);
+    assert_ne!(shas(a).await, shas(c).await);
+}
+
+#[tokio::test]
+async fn an_idempotency_key_returns_the_first_cohort_and_refuses_another_body() {
+    let app = spawn_app().await;
+    let body = cohort_body(2, 2).to_string();
+    let headers = [
+        ("content-type", "application/json"),
+        ("idempotency-key", "retry-1"),
+    ];
+    let first = app
+        .request(Method::POST, "/v1/cohorts", &headers, body.clone())
+        .await;
+    let again = app
+        .request(Method::POST, "/v1/cohorts", &headers, body)
+        .await;
+    assert_eq!(
+        (first.status, again.status),
+        (StatusCode::ACCEPTED, StatusCode::ACCEPTED)
+    );
+    assert_eq!(first.json()["id"], again.json()["id"]);
+    assert_eq!(again.header("idempotent-replayed"), Some("true"));
+    assert_eq!(app.count("cohort").await, 1);
+
+    let changed = app
+        .request(
+            Method::POST,
+            "/v1/cohorts",
+            &headers,
+            cohort_body(3, 2).to_string(),
+        )
+        .await;
+    assert_eq!(changed.status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(changed.json()["field"], "Idempotency-Key");
+    assert_eq!(app.count("cohort").await, 1);
+}
+
+#[tokio::test]
+async fn a_full_queue_answers_429_with_retry_after() {
+    let app = spawn_app().await;
+    for _ in 0..MAX_QUEUE {
+        app.create_cohort_ok(&cohort_body(1, 2)).await;
+    }
+    let r = app.create_cohort(&cohort_body(1, 2)).await;
+    assert_eq!(r.status, StatusCode::TOO_MANY_REQUESTS);
+    assert_eq!(r.header("retry-after"), Some("30"));
+    assert_eq!(r.header("content-type"), Some("application/problem+json"));
+    assert_eq!(app.count("cohort").await, MAX_QUEUE);
+    app.run_pending_jobs().await;
+    assert_eq!(
+        app.create_cohort(&cohort_body(1, 2)).await.status,
+        StatusCode::ACCEPTED
+    );
+}
+
+#[tokio::test]
+async fn cohorts_are_listed_newest_first_with_filters_and_pages() {
+    let app = spawn_app().await;
+    let a = app.create_cohort_ok(&cohort_body(1, 2)).await;
+    let b = app.create_cohort_ok(&cohort_body(1, 2)).await;
+    app.run_pending_jobs().await;
+    let c = app.create_cohort_ok(&cohort_body(1, 2)).await;
+
+    let all = app.get("/v1/cohorts").await.json();
+    let listed: Vec<i64> = all["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| i["id"].as_i64().unwrap())
+        .collect();
+    assert_eq!(listed, vec![c, b, a]);
+    let queued = app.get("/v1/cohorts?status=queued").await.json();
+    assert_eq!(queued["items"].as_array().unwrap().len(), 1);
+    assert_eq!(queued["items"][0]["id"], c);
+    let page = app.get("/v1/cohorts?limit=2").await.json();
+    assert_eq!(
+        (
+            page["items"].as_array().unwrap().len(),
+            page["next_offset"].as_i64()
+        ),
+        (2, Some(2))
+    );
+    let rest = app.get("/v1/cohorts?limit=2&offset=2").await.json();
+    assert_eq!(rest["items"][0]["id"], a);
+    let other = app.get("/v1/cohorts?model_id=other").await.json();
+    assert!(other["items"].as_array().unwrap().is_empty());
+    let mine = app
+        .get(&format!("/v1/cohorts?model_id={MODEL}"))
+        .await
+        .json();
+    assert_eq!(mine["items"].as_array().unwrap().len(), 3);
+}
+
+#[tokio::test]
+async fn a_queued_cohort_is_cancelled_at_once_and_never_runs() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(2, 2)).await;
+    let r = app
+        .request(Method::POST, &format!("/v1/cohorts/{id}/cancel"), &[], "")
+        .await;
+    assert_eq!(r.status, StatusCode::ACCEPTED);
+    assert_eq!(r.json()["status"], "cancelled");
+    assert!(app.run_pending_jobs().await.is_empty());
+    let again = app
+        .request(Method::POST, &format!("/v1/cohorts/{id}/cancel"), &[], "")
+        .await;
+    assert_eq!(again.status, StatusCode::CONFLICT);
+}
+
+#[tokio::test]
+async fn deleting_a_cohort_removes_its_shapes_metrics_and_job() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(2, 2)).await;
+    app.run_pending_jobs().await;
+    assert_eq!(app.count("shape").await, 2);
+    let r = app
+        .request(Method::DELETE, &format!("/v1/cohorts/{id}"), &[], "")
+        .await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT);
+    assert_eq!(
+        app.get(&format!("/v1/cohorts/{id}")).await.status,
+        StatusCode::NOT_FOUND
+    );
+    for table in ["shape", "cohort_metric", "cohort", "job"] {
+        assert_eq!(app.count(table).await, 0, "{table}");
+    }
+}

@@ -1,0 +1,173 @@
+//! A test double for the science engine: every "training shape" is an ellipsoid, and a
+//! generated shape is the ellipsoid whose semi-axes are the weight-mixed semi-axes, meshed
+//! as a UV sphere. Exact expectations (bounding box, area, mixing) follow from that.
+
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Duration;
+
+use aortagen::geometry::TriMesh;
+use aortagen::geometry::chamfer::chamfer_distance;
+use aortagen::geometry::normalize::UnitBallTransform;
+use aortagen::jobs::engine::{
+    CohortEngine, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo, TrainingSpec,
+};
+
+/// Number of training ellipsoids.
+pub const TRAINING_SHAPES: usize = 5;
+/// Where every generated shape is centred, in mm.
+pub const CENTRE_MM: [f64; 3] = [100.0, -50.0, 20.0];
+
+/// Semi-axes (mm) of training ellipsoid `i`.
+pub fn training_axes(i: usize) -> [f64; 3] {
+    let i = i as f64;
+    [10.0 + 2.0 * i, 12.0 + i, 30.0 + 3.0 * i]
+}
+
+/// Semi-axes of the weight-mixed shape.
+pub fn mixed_axes(indices: &[usize], weights: &[f64]) -> [f64; 3] {
+    let mut axes = [0.0; 3];
+    for (&i, &w) in indices.iter().zip(weights) {
+        for (a, t) in axes.iter_mut().zip(training_axes(i)) {
+            *a += w * t;
+        }
+    }
+    axes
+}
+
+/// The analytic engine, with hooks to hold or break generation at a given call.
+#[derive(Default)]
+pub struct AnalyticEngine {
+    /// `generate_shape` calls so far.
+    pub calls: AtomicUsize,
+    /// Calls numbered ≥ this (0-based) wait until `release` or the cancel flag is set.
+    pub hold_from_call: Option<usize>,
+    /// Lets held calls continue.
+    pub release: AtomicBool,
+    /// The call with this number panics.
+    pub panic_on_call: Option<usize>,
+}
+
+impl CohortEngine for AnalyticEngine {
+    fn model_info(&self, _: &Path) -> anyhow::Result<ModelInfo> {
+        Ok(ModelInfo {
+            latent_dim: 3,
+            architecture: serde_json::json!({ "kind": "analytic ellipsoids" }),
+            training_shapes: (0..TRAINING_SHAPES)
+                .map(|index| TrainingShapeInfo {
+                    index,
+                    name: format!("ellipsoid-{index}"),
+                    reconstruction_cd: Some(0.001 * (index + 1) as f64),
+                })
+                .collect(),
+        })
+    }
+
+    fn generate_shape(
+        &self,
+        _: &Path,
+        spec: &ShapeSpec,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<GeneratedShape> {
+        let call = self.calls.fetch_add(1, Ordering::SeqCst);
+        if self.panic_on_call == Some(call) {
+            panic!("analytic engine breaks on call {call}");
+        }
+        if self.hold_from_call.is_some_and(|h| call >= h) {
+            while !self.release.load(Ordering::SeqCst) && !cancel.load(Ordering::SeqCst) {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        }
+        anyhow::ensure!(!cancel.load(Ordering::SeqCst), "generation cancelled");
+        let axes = mixed_axes(&spec.training_indices, &spec.weights);
+        let radius = axes.iter().cloned().fold(0.0, f64::max);
+        let mut mesh = uv_sphere(8, 16);
+        for p in &mut mesh.positions {
+            for (c, a) in p.iter_mut().zip(axes) {
+                *c = (*c as f64 * a / radius) as f32;
+            }
+        }
+        mesh.normals = Some(mesh.compute_vertex_normals());
+        let area_mm2 = mesh.area() * radius.powi(2);
+        let volume_mm3 = mesh.signed_volume() * radius.powi(3);
+        Ok(GeneratedShape {
+            mesh_unit: mesh,
+            transform: UnitBallTransform {
+                centre: CENTRE_MM,
+                radius,
+            },
+            area_mm2,
+            volume_mm3,
+        })
+    }
+
+    fn pairwise_chamfer(&self, meshes: &[TriMesh], _: u64) -> anyhow::Result<Vec<Vec<f64>>> {
+        Ok(meshes
+            .iter()
+            .map(|a| {
+                meshes
+                    .iter()
+                    .map(|b| chamfer_distance(&a.positions, &b.positions))
+                    .collect()
+            })
+            .collect())
+    }
+
+    fn train_model(&self, spec: &TrainingSpec, _: &AtomicBool) -> anyhow::Result<ModelInfo> {
+        let files = std::fs::read_dir(&spec.input_dir)?.count();
+        let mut info = self.model_info(&spec.model_dir)?;
+        info.training_shapes.truncate(files);
+        Ok(info)
+    }
+}
+
+/// A unit sphere with `rings` latitude bands and `segments` meridians; outward,
+/// counter-clockwise triangles. With even `rings` and `segments` divisible by 4 its
+/// bounding box is exactly [-1, 1]³.
+pub fn uv_sphere(rings: u32, segments: u32) -> TriMesh {
+    use std::f64::consts::PI;
+    let mut positions = vec![[0.0, 0.0, 1.0]];
+    for i in 1..rings {
+        let theta = PI * i as f64 / rings as f64;
+        for j in 0..segments {
+            let phi = 2.0 * PI * j as f64 / segments as f64;
+            let p = [
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ];
+            positions.push(p.map(|c| c as f32));
+        }
+    }
+    positions.push([0.0, 0.0, -1.0]);
+    let bottom = positions.len() as u32 - 1;
+    let ring = |i: u32, j: u32| 1 + (i - 1) * segments + j % segments;
+    let mut triangles = Vec::new();
+    for j in 0..segments {
+        triangles.push([0, ring(1, j), ring(1, j + 1)]);
+        for i in 1..rings - 1 {
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i, j + 1),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+            );
+            triangles.push([a, c, d]);
+            triangles.push([a, d, b]);
+        }
+        triangles.push([bottom, ring(rings - 1, j + 1), ring(rings - 1, j)]);
+    }
+    TriMesh::new(positions, triangles)
+}
+
+#[test]
+fn uv_sphere_is_closed_outward_and_close_to_the_unit_sphere() {
+    let s = uv_sphere(8, 16);
+    s.validate().unwrap();
+    assert!(s.edge_report().is_closed_and_oriented());
+    assert_eq!(s.euler_characteristic(), 2);
+    // An inscribed polyhedron: volume a little below 4π/3, positive when outward.
+    let v = s.signed_volume();
+    let ball = 4.0 * std::f64::consts::PI / 3.0;
+    assert!(v > 0.85 * ball && v < ball, "{v}");
+}

@@ -1,0 +1,202 @@
+//! `spawn_app`: the service on port 0 with a temporary database, a registered analytic
+//! model and no background workers; tests run queued jobs themselves.
+
+use std::sync::{Arc, Once};
+
+use aortagen::config::Config;
+use aortagen::http::AppState;
+use aortagen::jobs::{ExecutionOutcome, try_execute_job};
+use aortagen::startup::{Application, register_model};
+use axum::body::Bytes;
+use axum::http::{HeaderMap, Method, Request, StatusCode};
+use http_body_util::{BodyExt, Full};
+use hyper_util::client::legacy::{Client, connect::HttpConnector};
+use hyper_util::rt::TokioExecutor;
+use serde_json::Value;
+
+use crate::engine::AnalyticEngine;
+
+/// Id of the analytic model every test app has.
+pub const MODEL: &str = "ellipsoids";
+/// Largest cohort in tests.
+pub const MAX_COUNT: u32 = 50;
+/// Queue bound in tests.
+pub const MAX_QUEUE: i64 = 3;
+/// Body limit in tests.
+pub const MAX_UPLOAD: usize = 64 * 1024;
+
+/// A running test service.
+pub struct TestApp {
+    /// `http://127.0.0.1:<port>`.
+    pub address: String,
+    /// Shared state (pool, job context).
+    pub state: AppState,
+    /// The engine behind the jobs.
+    pub engine: Arc<AnalyticEngine>,
+    /// The database URL (to reopen it).
+    pub database_url: String,
+    client: Client<HttpConnector, Full<Bytes>>,
+    _server: tokio::task::JoinHandle<anyhow::Result<()>>,
+    /// Keeps the database directory alive.
+    pub dir: Arc<tempfile::TempDir>,
+}
+
+/// A collected response.
+#[derive(Debug)]
+pub struct TestResponse {
+    /// Status.
+    pub status: StatusCode,
+    /// Headers.
+    pub headers: HeaderMap,
+    /// Body bytes.
+    pub body: Bytes,
+}
+
+impl TestResponse {
+    /// The body as JSON.
+    pub fn json(&self) -> Value {
+        serde_json::from_slice(&self.body)
+            .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&self.body)))
+    }
+
+    /// A header as text.
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers.get(name).and_then(|v| v.to_str().ok())
+    }
+}
+
+fn init_tracing() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        if std::env::var_os("TEST_LOG").is_some() {
+            aortagen::telemetry::init_subscriber("aortagen=debug", false);
+        }
+    });
+}
+
+/// Starts a service with the default analytic engine.
+pub async fn spawn_app() -> TestApp {
+    spawn_app_with(AnalyticEngine::default()).await
+}
+
+/// Starts a service on a fresh temporary database with `engine`.
+pub async fn spawn_app_with(engine: AnalyticEngine) -> TestApp {
+    let dir = Arc::new(tempfile::tempdir().expect("temp dir"));
+    let url = format!("sqlite://{}", dir.path().join("aortagen.db").display());
+    spawn_on(engine, dir, url).await
+}
+
+/// Starts a service on an existing database (a restart).
+pub async fn spawn_on(engine: AnalyticEngine, dir: Arc<tempfile::TempDir>, url: String) -> TestApp {
+    init_tracing();
+    let mut config = Config::with_database(url.clone(), "127.0.0.1:0");
+    config.max_count = MAX_COUNT;
+    config.max_queue = MAX_QUEUE;
+    config.max_upload_bytes = MAX_UPLOAD;
+    config.models_dir = dir.path().join("models");
+    let engine = Arc::new(engine);
+    let app = Application::build(config, engine.clone())
+        .await
+        .expect("app builds");
+    let state = app.state().clone();
+    let model_dir = dir.path().join("models").join(MODEL);
+    register_model(&state.pool, engine.clone(), MODEL, &model_dir)
+        .await
+        .expect("model registers");
+    let address = format!("http://127.0.0.1:{}", app.port());
+    let server = tokio::spawn(app.run_until_stopped(0, std::future::pending()));
+    let client = Client::builder(TokioExecutor::new()).build_http();
+    TestApp {
+        address,
+        state,
+        engine,
+        database_url: url,
+        client,
+        _server: server,
+        dir,
+    }
+}
+
+impl TestApp {
+    /// Sends a request.
+    pub async fn request(
+        &self,
+        method: Method,
+        path: &str,
+        headers: &[(&str, &str)],
+        body: impl Into<Bytes>,
+    ) -> TestResponse {
+        let mut req = Request::builder()
+            .method(method)
+            .uri(format!("{}{path}", self.address));
+        for (k, v) in headers {
+            req = req.header(*k, *v);
+        }
+        let response = self
+            .client
+            .request(req.body(Full::new(body.into())).unwrap())
+            .await
+            .expect("request is sent");
+        let (parts, body) = response.into_parts();
+        let body = body.collect().await.expect("body is read").to_bytes();
+        TestResponse {
+            status: parts.status,
+            headers: parts.headers,
+            body,
+        }
+    }
+
+    /// GET.
+    pub async fn get(&self, path: &str) -> TestResponse {
+        self.request(Method::GET, path, &[], Bytes::new()).await
+    }
+
+    /// POST a JSON body.
+    pub async fn post_json(&self, path: &str, body: &Value) -> TestResponse {
+        let headers = [("content-type", "application/json")];
+        self.request(Method::POST, path, &headers, body.to_string())
+            .await
+    }
+
+    /// POST /v1/cohorts.
+    pub async fn create_cohort(&self, body: &Value) -> TestResponse {
+        self.post_json("/v1/cohorts", body).await
+    }
+
+    /// Creates a cohort, asserting 202, and returns its id.
+    pub async fn create_cohort_ok(&self, body: &Value) -> i64 {
+        let r = self.create_cohort(body).await;
+        assert_eq!(
+            r.status,
+            StatusCode::ACCEPTED,
+            "{}",
+            String::from_utf8_lossy(&r.body)
+        );
+        r.json()["id"].as_i64().unwrap()
+    }
+
+    /// Runs queued jobs until the queue is empty; returns what each run did.
+    pub async fn run_pending_jobs(&self) -> Vec<ExecutionOutcome> {
+        let mut outcomes = Vec::new();
+        loop {
+            match try_execute_job(&self.state.jobs).await.expect("job runs") {
+                ExecutionOutcome::EmptyQueue => return outcomes,
+                done => outcomes.push(done),
+            }
+        }
+    }
+
+    /// Counts rows of a table.
+    pub async fn count(&self, table: &str) -> i64 {
+        let sql = sqlx::AssertSqlSafe(format!("select count(*) from {table}"));
+        sqlx::query_scalar(sql)
+            .fetch_one(&self.state.pool)
+            .await
+            .unwrap()
+    }
+}
+
+/// A cohort request on the analytic model.
+pub fn cohort_body(count: i64, arity: i64) -> Value {
+    serde_json::json!({ "model_id": MODEL, "count": count, "arity": arity, "seed": 7, "resolution": 64 })
+}

@@ -1,0 +1,157 @@
+//! The model registry and training uploads.
+
+use aortagen::formats::{MeshFormat, MeshMetadata, write_mesh};
+use axum::http::{Method, StatusCode};
+
+use crate::engine::uv_sphere;
+use crate::helpers::{MAX_UPLOAD, MODEL, TestApp, cohort_body, spawn_app};
+
+#[tokio::test]
+async fn models_report_training_set_size_and_reconstruction_fidelity() {
+    let app = spawn_app().await;
+    let list = app.get("/v1/models").await.json();
+    assert_eq!(list.as_array().unwrap().len(), 1);
+    let m = app.get(&format!("/v1/models/{MODEL}")).await.json();
+    assert_eq!(
+        (m["status"].as_str(), m["training_shapes"].as_u64()),
+        (Some("ready"), Some(5))
+    );
+    assert_eq!(m["latent_dim"], 3);
+    let cd = &m["reconstruction_cd"];
+    // The analytic model reports 0.001·(i+1) for i = 0..5.
+    assert_eq!(cd["count"], 5);
+    assert!((cd["mean"].as_f64().unwrap() - 0.003).abs() < 1e-12);
+    assert!((cd["median"].as_f64().unwrap() - 0.003).abs() < 1e-12);
+    assert!((cd["max"].as_f64().unwrap() - 0.005).abs() < 1e-12);
+    let shapes = app.get(&format!("/v1/models/{MODEL}/shapes")).await.json();
+    assert_eq!(shapes.as_array().unwrap().len(), 5);
+    assert_eq!(shapes[4]["name"], "ellipsoid-4");
+}
+
+#[tokio::test]
+async fn a_model_in_use_cannot_be_deleted_and_an_unused_one_can() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(1, 2)).await;
+    let path = format!("/v1/models/{MODEL}");
+    assert_eq!(
+        app.request(Method::DELETE, &path, &[], "").await.status,
+        StatusCode::CONFLICT
+    );
+    app.run_pending_jobs().await;
+    app.request(Method::DELETE, &format!("/v1/cohorts/{id}"), &[], "")
+        .await;
+    assert_eq!(
+        app.request(Method::DELETE, &path, &[], "").await.status,
+        StatusCode::NO_CONTENT
+    );
+    assert_eq!(app.get(&path).await.status, StatusCode::NOT_FOUND);
+}
+
+fn multipart(parts: &[(&str, Option<&str>, Vec<u8>)]) -> (String, Vec<u8>) {
+    let boundary = "aortagen-test-boundary";
+    let mut body = Vec::new();
+    for (name, file, bytes) in parts {
+        body.extend_from_slice(
+            format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").as_bytes(),
+        );
+        if let Some(f) = file {
+            body.extend_from_slice(
+                format!("; filename=\"{f}\"\r\nContent-Type: application/octet-stream").as_bytes(),
+            );
+        }
+        body.extend_from_slice(b"\r\n\r\n");
+        body.extend_from_slice(bytes);
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
+    (format!("multipart/form-data; boundary={boundary}"), body)
+}
+
+async fn upload(
+    app: &TestApp,
+    parts: &[(&str, Option<&str>, Vec<u8>)],
+) -> crate::helpers::TestResponse {
+    let (content_type, body) = multipart(parts);
+    app.request(
+        Method::POST,
+        "/v1/models",
+        &[("content-type", &content_type)],
+        body,
+    )
+    .await
+}
+
+fn stl() -> Vec<u8> {
+    write_mesh(&uv_sphere(6, 8), MeshFormat::Stl, &MeshMetadata::new("mm")).unwrap()
+}
+
+#[tokio::test]
+async fn uploaded_meshes_train_a_new_model_as_a_job() {
+    let app = spawn_app().await;
+    let parts = [
+        ("id", None, b"aortas-2".to_vec()),
+        ("files", Some("a.stl"), stl()),
+        ("files", Some("b.stl"), stl()),
+    ];
+    let r = upload(&app, &parts).await;
+    assert_eq!(
+        r.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    assert_eq!(
+        app.get("/v1/models/aortas-2").await.json()["status"],
+        "training"
+    );
+    app.run_pending_jobs().await;
+    let m = app.get("/v1/models/aortas-2").await.json();
+    assert_eq!(
+        (m["status"].as_str(), m["training_shapes"].as_u64()),
+        (Some("ready"), Some(2))
+    );
+    let job = app
+        .get(&format!("/v1/jobs/{}", r.json()["job_id"]))
+        .await
+        .json();
+    assert_eq!(
+        (job["kind"].as_str(), job["status"].as_str()),
+        (Some("training"), Some("succeeded"))
+    );
+}
+
+#[tokio::test]
+async fn a_bad_upload_is_refused_naming_the_file_and_nothing_is_stored() {
+    let app = spawn_app().await;
+    let broken = upload(
+        &app,
+        &[
+            ("files", Some("good.stl"), stl()),
+            ("files", Some("broken.ply"), b"ply\nnonsense".to_vec()),
+        ],
+    )
+    .await;
+    assert_eq!(broken.status, StatusCode::UNPROCESSABLE_ENTITY);
+    let p = broken.json();
+    assert_eq!(p["field"], "files[broken.ply]");
+    assert!(p["detail"].as_str().unwrap().contains("broken.ply"));
+
+    let big = upload(
+        &app,
+        &[
+            ("files", Some("a.stl"), vec![0; MAX_UPLOAD + 1]),
+            ("files", Some("b.stl"), stl()),
+        ],
+    )
+    .await;
+    assert_eq!(big.status, StatusCode::PAYLOAD_TOO_LARGE);
+    let one = upload(&app, &[("files", Some("a.stl"), stl())]).await;
+    assert_eq!(
+        (one.status, one.json()["field"].as_str()),
+        (StatusCode::UNPROCESSABLE_ENTITY, Some("files"))
+    );
+    let json = app.post_json("/v1/models", &serde_json::json!({})).await;
+    assert_eq!(json.status, StatusCode::UNSUPPORTED_MEDIA_TYPE);
+    assert_eq!(app.count("model").await, 1);
+    assert_eq!(app.count("job").await, 0);
+}

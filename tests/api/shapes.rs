@@ -1,0 +1,202 @@
+//! Shape provenance, mesh downloads in every format and unit, caching, cohort metrics.
+
+use aortagen::db::mesh_blob;
+use aortagen::formats::{MeshFormat, read_mesh_bytes};
+use aortagen::geometry::chamfer::chamfer_distance;
+use axum::http::{Method, StatusCode};
+use serde_json::Value;
+
+use crate::engine::{CENTRE_MM, mixed_axes, uv_sphere};
+use crate::helpers::{MODEL, TestApp, cohort_body, spawn_app};
+
+async fn finished_cohort(app: &TestApp, count: i64) -> (i64, Vec<Value>) {
+    let id = app.create_cohort_ok(&cohort_body(count, 3)).await;
+    app.run_pending_jobs().await;
+    let page = app.get(&format!("/v1/cohorts/{id}/shapes")).await.json();
+    (id, page["items"].as_array().unwrap().clone())
+}
+
+fn glb_positions(bytes: &[u8]) -> Vec<[f32; 3]> {
+    let (doc, buffers, _) = gltf::import_slice(bytes).expect("a valid GLB");
+    let primitive = doc.meshes().next().unwrap().primitives().next().unwrap();
+    let reader = primitive.reader(|b| Some(&buffers[b.index()]));
+    reader.read_positions().unwrap().collect()
+}
+
+fn bbox(points: &[[f32; 3]]) -> ([f64; 3], [f64; 3]) {
+    let mut lo = [f64::MAX; 3];
+    let mut hi = [f64::MIN; 3];
+    for p in points {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k] as f64);
+            hi[k] = hi[k].max(p[k] as f64);
+        }
+    }
+    (lo, hi)
+}
+
+#[tokio::test]
+async fn a_shape_records_its_provenance_and_measures() {
+    let app = spawn_app().await;
+    let (cohort, shapes) = finished_cohort(&app, 2).await;
+    let s = &shapes[1];
+    assert_eq!(
+        (s["cohort_id"].as_i64(), s["index"].as_i64()),
+        (Some(cohort), Some(1))
+    );
+    let p = &s["provenance"];
+    assert_eq!(p["model_id"], MODEL);
+    assert_eq!(p["training_indices"].as_array().unwrap().len(), 3);
+    let sum: f64 = p["weights"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_f64().unwrap())
+        .sum();
+    assert!((sum - 1.0).abs() < 1e-9);
+    assert_eq!(
+        (p["resolution"].as_i64(), p["software_version"].as_str()),
+        (Some(64), Some(aortagen::VERSION))
+    );
+    let reference = uv_sphere(8, 16);
+    assert_eq!(
+        s["vertex_count"].as_u64(),
+        Some(reference.vertex_count() as u64)
+    );
+    assert_eq!(
+        s["triangle_count"].as_u64(),
+        Some(reference.triangle_count() as u64)
+    );
+    assert_eq!(s["units"], "mm");
+    let one = app.get(&format!("/v1/shapes/{}", s["id"])).await.json();
+    assert_eq!(&one, s);
+}
+
+#[tokio::test]
+async fn the_glb_download_is_the_mixed_ellipsoid_in_millimetres() {
+    let app = spawn_app().await;
+    let (_, shapes) = finished_cohort(&app, 1).await;
+    let s = &shapes[0];
+    let r = app.get(&format!("/v1/shapes/{}/mesh", s["id"])).await;
+    assert_eq!(r.status, StatusCode::OK);
+    assert_eq!(r.header("content-type"), Some("model/gltf-binary"));
+    assert_eq!(
+        r.header("cache-control"),
+        Some("public, max-age=31536000, immutable")
+    );
+    let positions = glb_positions(&r.body);
+    assert_eq!(positions.len() as u64, s["vertex_count"].as_u64().unwrap());
+
+    let indices: Vec<usize> =
+        serde_json::from_value(s["provenance"]["training_indices"].clone()).unwrap();
+    let weights: Vec<f64> = serde_json::from_value(s["provenance"]["weights"].clone()).unwrap();
+    let axes = mixed_axes(&indices, &weights);
+    let (lo, hi) = bbox(&positions);
+    for k in 0..3 {
+        assert!(
+            (lo[k] - (CENTRE_MM[k] - axes[k])).abs() < 1e-3,
+            "axis {k}: {lo:?} vs {axes:?}"
+        );
+        assert!(
+            (hi[k] - (CENTRE_MM[k] + axes[k])).abs() < 1e-3,
+            "axis {k}: {hi:?} vs {axes:?}"
+        );
+    }
+
+    let unit = app
+        .get(&format!("/v1/shapes/{}/mesh?units=unit", s["id"]))
+        .await;
+    let (lo, hi) = bbox(&glb_positions(&unit.body));
+    let largest = lo.iter().map(|v| v.abs()).chain(hi).fold(0.0, f64::max);
+    assert!((largest - 1.0).abs() < 1e-6, "{largest}");
+    assert_ne!(unit.header("etag"), r.header("etag"));
+}
+
+#[tokio::test]
+async fn every_format_downloads_the_same_triangles() {
+    let app = spawn_app().await;
+    let (_, shapes) = finished_cohort(&app, 1).await;
+    let id = &shapes[0]["id"];
+    let triangles = shapes[0]["triangle_count"].as_u64().unwrap() as usize;
+    for (name, format, mime) in [
+        ("gltf", MeshFormat::Gltf, "model/gltf+json"),
+        ("stl", MeshFormat::Stl, "model/stl"),
+        ("obj", MeshFormat::Obj, "model/obj"),
+        ("ply", MeshFormat::Ply, "application/x-ply"),
+    ] {
+        let r = app
+            .get(&format!("/v1/shapes/{id}/mesh?format={name}"))
+            .await;
+        assert_eq!(
+            (r.status, r.header("content-type")),
+            (StatusCode::OK, Some(mime)),
+            "{name}"
+        );
+        let mesh = read_mesh_bytes(&r.body, format, name).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(mesh.triangle_count(), triangles, "{name}");
+    }
+}
+
+#[tokio::test]
+async fn a_matching_if_none_match_answers_304_without_a_body() {
+    let app = spawn_app().await;
+    let (_, shapes) = finished_cohort(&app, 1).await;
+    let path = format!("/v1/shapes/{}/mesh?format=stl", shapes[0]["id"]);
+    let first = app.get(&path).await;
+    let etag = first.header("etag").unwrap().to_owned();
+    let again = app
+        .request(Method::GET, &path, &[("if-none-match", &etag)], "")
+        .await;
+    assert_eq!(again.status, StatusCode::NOT_MODIFIED);
+    assert!(again.body.is_empty());
+    let other = app
+        .request(Method::GET, &path, &[("if-none-match", "\"nope\"")], "")
+        .await;
+    assert_eq!(
+        (other.status, other.body.len()),
+        (StatusCode::OK, first.body.len())
+    );
+}
+
+#[tokio::test]
+async fn cohort_metrics_hold_the_pairwise_chamfer_of_the_stored_meshes() {
+    let app = spawn_app().await;
+    let early = app.create_cohort_ok(&cohort_body(2, 2)).await;
+    assert_eq!(
+        app.get(&format!("/v1/cohorts/{early}/metrics"))
+            .await
+            .status,
+        StatusCode::CONFLICT
+    );
+    app.run_pending_jobs().await;
+    let (id, shapes) = finished_cohort(&app, 4).await;
+
+    let m = app
+        .get(&format!("/v1/cohorts/{id}/metrics?matrix=true"))
+        .await
+        .json();
+    let ids: Vec<i64> = shapes.iter().map(|s| s["id"].as_i64().unwrap()).collect();
+    assert_eq!(m["shape_ids"], serde_json::json!(ids));
+    assert_eq!(m["summary"]["pairs"], 6);
+    let blobs: Vec<Vec<u8>> =
+        sqlx::query_scalar("select mesh from shape where cohort_id = ? order by shape_index")
+            .bind(id)
+            .fetch_all(&app.state.pool)
+            .await
+            .unwrap();
+    let meshes: Vec<_> = blobs
+        .iter()
+        .map(|b| mesh_blob::decode(b).unwrap())
+        .collect();
+    let expected = chamfer_distance(&meshes[1].positions, &meshes[3].positions);
+    assert!((m["matrix"][1][3].as_f64().unwrap() - expected).abs() <= 1e-12 * expected.max(1.0));
+    assert!(expected > 0.0);
+
+    let csv = app
+        .get(&format!("/v1/cohorts/{id}/metrics?format=csv"))
+        .await;
+    assert_eq!(csv.header("content-type"), Some("text/csv; charset=utf-8"));
+    let text = String::from_utf8(csv.body.to_vec()).unwrap();
+    assert_eq!(text.lines().count(), 1 + 6);
+    assert!(text.starts_with("shape_a,shape_b,chamfer\n"));
+}
