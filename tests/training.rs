@@ -9,6 +9,7 @@ use aortagen::sdf::backend::Backend;
 use aortagen::sdf::data::{DataSource, load_source_meshes};
 use aortagen::sdf::decoder::SdfAutoDecoder;
 use aortagen::sdf::evaluation::{EvaluationSettings, evaluate_model};
+use aortagen::sdf::reconstruct::ExtractionMethod;
 use aortagen::sdf::store::{LoadedModel, ModelLoadError};
 use aortagen::sdf::training::{
     Preset, Silent, StepReport, TrainingObserver, TrainingOutcome, TrainingRequest, TrainingSetup,
@@ -97,6 +98,7 @@ fn a_tiny_run_trains_saves_loads_and_evaluates() {
         resolution: 24,
         chamfer_points: 1500,
         seed: 1,
+        extraction: ExtractionMethod::Fast,
     };
     let mut seen = 0;
     let report = evaluate_model(&model, &originals, &settings, &mut |_| seen += 1).unwrap();
@@ -494,7 +496,16 @@ mod cohort {
             weights: None,
             weighting: Weighting::Dirichlet,
         };
-        let shape = generate_shape(&model, &latents, &dirichlet, 7, 1, 20).unwrap();
+        let shape = generate_shape(
+            &model,
+            &latents,
+            &dirichlet,
+            7,
+            1,
+            20,
+            ExtractionMethod::Fast,
+        )
+        .unwrap();
         assert_eq!(shape.mixture, dirichlet.mixture(SHAPES, 7, 1).unwrap());
         shape.mesh.validate().unwrap();
         let transforms = model.manifest.transforms();
@@ -510,7 +521,16 @@ mod cohort {
         let p = shape.mesh.positions[0].map(f64::from);
         let q = shape.transform.to_mesh_units(p);
         assert!((0..3).all(|c| (f64::from(mm.positions[0][c]) - q[c]).abs() < 1e-3));
-        let err = generate_shape(&model, &latents, &spec(5, None), 7, 0, 20).unwrap_err();
+        let err = generate_shape(
+            &model,
+            &latents,
+            &spec(5, None),
+            7,
+            0,
+            20,
+            ExtractionMethod::Dense,
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("arity"), "{err}");
     }
 }

@@ -10,6 +10,7 @@ use crate::sdf::backend::Backend;
 use crate::sdf::data::{DataSource, load_source_meshes};
 use crate::sdf::evaluation::{CHAMFER_UNITS, EvaluationReport, EvaluationSettings, evaluate_model};
 use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
+use crate::sdf::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
 use crate::sdf::store::LoadedModel;
 
 /// Reconstruct each training shape from its latent and compare it with the original.
@@ -36,6 +37,10 @@ pub struct EvaluateArgs {
     /// Compute backend.
     #[arg(long, default_value = "flex", value_parser = parse_backend)]
     pub backend: Backend,
+    /// Surface extraction: `fast` evaluates the network only near the surface, `dense` on
+    /// every grid sample (the reference; both give the same mesh).
+    #[arg(long, value_enum, default_value = "fast")]
+    pub extraction: ExtractionMethod,
 }
 
 fn parse_backend(s: &str) -> Result<Backend, String> {
@@ -45,7 +50,10 @@ fn parse_backend(s: &str) -> Result<Backend, String> {
 /// Runs `aortagen evaluate`.
 pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
     init_logging();
-    ensure!(args.resolution >= 2, "--resolution must be at least 2");
+    ensure!(
+        (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&args.resolution),
+        "--resolution must be between {MIN_RESOLUTION} and {MAX_RESOLUTION}"
+    );
     ensure!(args.points >= 1, "--points must be at least 1");
     let model = LoadedModel::load(&args.model, args.backend)?;
     let source = match &args.data {
@@ -60,6 +68,7 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         resolution: args.resolution,
         chamfer_points: args.points,
         seed: args.seed,
+        extraction: args.extraction,
     };
     let bar = terminal_bar(originals.len() as u64, "shapes");
     let report = evaluate_model(&model, &originals, &settings, &mut |shape| match (

@@ -9,6 +9,7 @@ use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::sdf::backend::Backend;
 use crate::sdf::generate::{MixSpec, Provenance, Weighting, generate_shape, parse_weights};
 use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
+use crate::sdf::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
 use crate::sdf::store::LoadedModel;
 
 /// Coordinates of the written meshes.
@@ -57,6 +58,10 @@ pub struct GenerateArgs {
     /// Compute backend.
     #[arg(long, default_value = "flex", value_parser = parse_backend)]
     pub backend: Backend,
+    /// Surface extraction: `fast` evaluates the network only near the surface, `dense` on
+    /// every grid sample (the reference; both give the same mesh).
+    #[arg(long, value_enum, default_value = "fast")]
+    pub extraction: ExtractionMethod,
 }
 
 fn parse_backend(s: &str) -> Result<Backend, String> {
@@ -70,7 +75,10 @@ fn parse_format(s: &str) -> Result<MeshFormat, String> {
 /// Runs `aortagen generate`.
 pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     init_logging();
-    ensure!(args.resolution >= 2, "--resolution must be at least 2");
+    ensure!(
+        (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&args.resolution),
+        "--resolution must be between {MIN_RESOLUTION} and {MAX_RESOLUTION}"
+    );
     let weights = match &args.weights {
         Some(text) => Some(parse_weights(text).map_err(|e| anyhow::anyhow!("--weights: {e}"))?),
         None => None,
@@ -92,8 +100,16 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     };
     let bar = terminal_bar(args.count, "shapes");
     for shape in 0..args.count {
-        let generated = generate_shape(&model, &latents, &spec, args.seed, shape, args.resolution)
-            .with_context(|| format!("shape {shape}"))?;
+        let generated = generate_shape(
+            &model,
+            &latents,
+            &spec,
+            args.seed,
+            shape,
+            args.resolution,
+            args.extraction,
+        )
+        .with_context(|| format!("shape {shape}"))?;
         let provenance =
             Provenance::new(&model, &generated, args.seed, shape, args.resolution, units);
         let mesh = match args.units {

@@ -9,7 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::reconstruct::reconstruct_mesh;
+use super::reconstruct::{ExtractionMethod, reconstruct};
 use super::store::LoadedModel;
 use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{chamfer_distance, sampling_floor};
@@ -28,6 +28,8 @@ pub struct EvaluationSettings {
     pub chamfer_points: usize,
     /// Seed of those samplings.
     pub seed: u64,
+    /// Fast (coarse-to-fine) or dense extraction of the reconstructed surface.
+    pub extraction: ExtractionMethod,
 }
 
 /// One training shape's result.
@@ -122,7 +124,9 @@ pub fn evaluate_model(
         let reconstructed = model
             .field(&latents[index])
             .map_err(Into::into)
-            .and_then(|f| reconstruct_mesh(&f, settings.resolution));
+            .and_then(|f| {
+                reconstruct(&f, settings.resolution, settings.extraction).map(|e| e.mesh)
+            });
         let result = match reconstructed {
             Ok(mesh) => {
                 let a = sample_surface(&mesh, settings.chamfer_points, seed ^ 0x5eed);

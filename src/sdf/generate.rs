@@ -13,7 +13,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::manifest::SIGN_CONVENTION;
-use super::reconstruct::{ReconstructError, reconstruct_mesh};
+use super::reconstruct::{ExtractionMethod, ReconstructError, reconstruct};
 use super::store::LoadedModel;
 use crate::geometry::TriMesh;
 use crate::geometry::normalize::{BlendError, UnitBallTransform};
@@ -257,13 +257,14 @@ pub fn generate_shape(
     seed: u64,
     shape: u64,
     resolution: usize,
+    extraction: ExtractionMethod,
 ) -> Result<GeneratedShape, GenerateError> {
     let mixture = spec.mixture(latents.len(), seed, shape)?;
     let transform = mixture.mix_transforms(&model.manifest.transforms())?;
     let field = model
         .field(&mixture.mix_latents(latents))
         .map_err(ReconstructError::from)?;
-    let mesh = reconstruct_mesh(&field, resolution)?;
+    let mesh = reconstruct(&field, resolution, extraction)?.mesh;
     Ok(GeneratedShape {
         mixture,
         transform,

@@ -602,7 +602,10 @@ mod tests {
                 let cos = (gi[0] * d[0] + gi[1] * d[1] + gi[2] * d[2]) / norm;
                 // Near the origin the smoothed cone's gradient is small and less radial.
                 let min_cos = if rho < 0.3 { 0.5 } else { 0.8 };
-                assert!(cos > min_cos, "ρ = {rho}, direction {i}: cos(∇f, x̂) = {cos}");
+                assert!(
+                    cos > min_cos,
+                    "ρ = {rho}, direction {i}: cos(∇f, x̂) = {cos}"
+                );
                 if let Some(prev) = &previous {
                     assert!(f[i] > prev[i], "ρ = {rho}, direction {i}: f not increasing");
                 }

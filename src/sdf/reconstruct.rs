@@ -4,8 +4,11 @@
 //! The dense grid is the reference path (DESIGN §3); it is evaluated one z-slab at a time so
 //! memory stays at one R² slab of points plus the R³ values.
 
+use crate::extract::{
+    ExtractError, ExtractOptions, Extraction, ScalarField, extract_dense, extract_surface,
+};
 use crate::geometry::TriMesh;
-use crate::geometry::marching_cubes::{Grid, marching_cubes};
+use crate::geometry::marching_cubes::Grid;
 
 use super::field::{FieldError, SdfField};
 
@@ -15,9 +18,12 @@ pub const DEFAULT_RESOLUTION: usize = 128;
 /// Why a latent produced no usable mesh.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ReconstructError {
-    /// Fewer than 2 samples per axis.
-    #[error("grid resolution must be at least 2 (got {0})")]
+    /// Resolution outside the supported range.
+    #[error("resolution must be between {MIN_RESOLUTION} and {MAX_RESOLUTION} (got {0})")]
     Resolution(usize),
+    /// The extraction rejected its input.
+    #[error("surface extraction failed: {0}")]
+    Extract(ExtractError),
     /// The network could not be evaluated.
     #[error(transparent)]
     Field(#[from] FieldError),
@@ -29,6 +35,11 @@ pub enum ReconstructError {
     NotFinite(usize),
 }
 
+/// Smallest grid resolution accepted.
+pub const MIN_RESOLUTION: usize = 8;
+/// Largest grid resolution accepted (the sparse path's memory stays bounded up to here).
+pub const MAX_RESOLUTION: usize = 1024;
+
 /// The R³ grid over [-1,1]³ used for every reconstruction.
 pub fn unit_grid(resolution: usize) -> Grid {
     Grid {
@@ -38,55 +49,109 @@ pub fn unit_grid(resolution: usize) -> Grid {
     }
 }
 
-/// Field values at every grid sample, x-fastest (`values[i + R*(j + R*k)]`).
-pub fn sample_grid(field: &SdfField, grid: &Grid) -> Result<Vec<f32>, ReconstructError> {
-    let r = grid.resolution;
-    if r < 2 {
-        return Err(ReconstructError::Resolution(r));
-    }
-    let step = (grid.max - grid.min) / (r - 1) as f32;
-    let coord = |i: usize| grid.min + i as f32 * step;
-    let mut values = vec![0.0f32; r * r * r];
-    let mut slab = Vec::with_capacity(r * r);
-    for (k, out) in values.chunks_mut(r * r).enumerate() {
-        slab.clear();
-        for j in 0..r {
-            for i in 0..r {
-                slab.push([coord(i), coord(j), coord(k)]);
-            }
-        }
-        field.try_eval_batch(&slab, out, None)?;
-    }
-    let bad = values.iter().filter(|v| !v.is_finite()).count();
-    if bad > 0 {
-        return Err(ReconstructError::NotFinite(bad));
-    }
-    Ok(values)
+/// How the zero level is extracted from the network.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum ExtractionMethod {
+    /// Coarse-to-fine: the network is evaluated only in blocks that can hold the surface
+    /// ([`crate::extract::extract_surface`]); same mesh as `dense`, a fraction of the work.
+    #[default]
+    Fast,
+    /// Every sample of the R³ grid (the reference path).
+    Dense,
 }
 
-/// The zero level set of `field` as a mesh in unit-ball coordinates, with unit normals from
-/// ∇ₓf at the vertices.
-pub fn reconstruct_mesh(field: &SdfField, resolution: usize) -> Result<TriMesh, ReconstructError> {
-    let grid = unit_grid(resolution);
-    let values = sample_grid(field, &grid)?;
-    let mut mesh = marching_cubes(&grid, &values, 0.0);
-    if mesh.triangles.is_empty() {
+/// Samples per axis of the probe grid that estimates the field's Lipschitz constant.
+const LIPSCHITZ_PROBE_RESOLUTION: usize = 17;
+
+/// A neural field as the extraction code sees it: values, exact gradients, and a Lipschitz
+/// bound estimated from the gradient norm.
+///
+/// A trained SDF has ‖∇f‖ ≈ 1 near its surface (the eikonal term), but nothing bounds it
+/// analytically. The bound is the largest ‖∇f‖ over a probe grid (and never below 1, the
+/// value of an exact SDF); [`ExtractOptions::safety`] adds the margin on top.
+pub struct NeuralField<'a> {
+    field: &'a SdfField,
+    lipschitz: f32,
+}
+
+impl<'a> NeuralField<'a> {
+    /// Wraps `field`, probing its gradient on a coarse grid over [-1,1]³.
+    pub fn new(field: &'a SdfField) -> Result<Self, ReconstructError> {
+        let grid = unit_grid(LIPSCHITZ_PROBE_RESOLUTION);
+        let points: Vec<[f32; 3]> = grid.points().collect();
+        let mut values = vec![0.0f32; points.len()];
+        let mut gradients = vec![[0.0f32; 3]; points.len()];
+        field.try_eval_batch(&points, &mut values, Some(&mut gradients))?;
+        let mut largest = 1.0f32;
+        for g in &gradients {
+            let n = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+            if !n.is_finite() {
+                return Err(ReconstructError::NotFinite(1));
+            }
+            largest = largest.max(n);
+        }
+        Ok(Self {
+            field,
+            lipschitz: largest,
+        })
+    }
+}
+
+impl ScalarField for NeuralField<'_> {
+    fn eval_batch(
+        &self,
+        points: &[[f32; 3]],
+        values: &mut [f32],
+        gradients: Option<&mut [[f32; 3]]>,
+    ) {
+        self.field.eval_batch(points, values, gradients);
+    }
+
+    fn lipschitz_bound(&self) -> f32 {
+        self.lipschitz
+    }
+}
+
+/// The zero level set of `field` in unit-ball coordinates by `method`, with unit normals
+/// from ∇ₓf at the vertices and small floating pieces removed (see [`ExtractOptions`]).
+pub fn reconstruct(
+    field: &SdfField,
+    resolution: usize,
+    method: ExtractionMethod,
+) -> Result<Extraction, ReconstructError> {
+    if !(MIN_RESOLUTION..=MAX_RESOLUTION).contains(&resolution) {
+        return Err(ReconstructError::Resolution(resolution));
+    }
+    let neural = NeuralField::new(field)?;
+    let options = ExtractOptions::default();
+    let extraction = match method {
+        ExtractionMethod::Fast => extract_surface(&neural, resolution, &options),
+        ExtractionMethod::Dense => extract_dense(&neural, resolution, &options),
+    }
+    .map_err(|e| match e {
+        ExtractError::NonFinite { .. } => ReconstructError::NotFinite(1),
+        other => ReconstructError::Extract(other),
+    })?;
+    if extraction.mesh.triangles.is_empty() {
         return Err(ReconstructError::EmptySurface(resolution));
     }
-    let mut f = vec![0.0f32; mesh.positions.len()];
-    let mut gradients = vec![[0.0f32; 3]; mesh.positions.len()];
-    field.try_eval_batch(&mesh.positions, &mut f, Some(&mut gradients))?;
-    mesh.normals = Some(gradients.into_iter().map(unit_or_zero).collect());
-    Ok(mesh)
+    Ok(extraction)
 }
 
-fn unit_or_zero(g: [f32; 3]) -> [f32; 3] {
-    let n = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-    if n > 0.0 && n.is_finite() {
-        g.map(|c| c / n)
-    } else {
-        [0.0; 3]
-    }
+/// The zero level set of `field` as a mesh in unit-ball coordinates (fast path).
+pub fn reconstruct_mesh(field: &SdfField, resolution: usize) -> Result<TriMesh, ReconstructError> {
+    reconstruct(field, resolution, ExtractionMethod::Fast).map(|e| e.mesh)
 }
 
 #[cfg(test)]
@@ -94,6 +159,7 @@ mod tests {
     use super::*;
     use crate::sdf::backend::Backend;
     use crate::sdf::network::SdfNetworkConfig;
+    use crate::sdf::network::test_support::perturbed;
 
     /// The untrained network is roughly the SDF of a sphere of radius `radius_init`
     /// (geometric initialisation): a closed, outward mesh whose vertices lie on the field's
@@ -127,13 +193,45 @@ mod tests {
     }
 
     #[test]
-    fn resolutions_below_two_are_rejected() {
+    fn resolutions_outside_the_supported_range_are_rejected() {
         let device = Backend::default().device(false).unwrap();
         let network = SdfNetworkConfig::new().with_latent_dim(2).with_hidden(8);
         let field = SdfField::new(&network.init(0, &device).unwrap(), &[0.0; 2]).unwrap();
-        assert_eq!(
-            reconstruct_mesh(&field, 1).unwrap_err(),
-            ReconstructError::Resolution(1)
-        );
+        for bad in [1, MIN_RESOLUTION - 1, MAX_RESOLUTION + 1] {
+            assert_eq!(
+                reconstruct_mesh(&field, bad).unwrap_err(),
+                ReconstructError::Resolution(bad)
+            );
+        }
+    }
+
+    /// The fast path must give the dense reference's mesh: same triangles, vertices within
+    /// 1e-5, on a network whose latent bends the initial sphere into a lumpy shape.
+    #[test]
+    fn fast_extraction_gives_the_dense_mesh_on_a_network() {
+        let device = Backend::default().device(false).unwrap();
+        let config = SdfNetworkConfig::new().with_latent_dim(3).with_hidden(32);
+        // Noise on every weight turns the initial sphere into a lumpy, latent-dependent
+        // surface, which exercises the culling bound far more than a sphere does.
+        let network = perturbed(config.init(7, &device).unwrap(), 3, 0.05);
+        for latent in [[0.0f32, 0.0, 0.0], [0.8, -0.6, 0.4]] {
+            let field = SdfField::new(&network, &latent).unwrap();
+            for resolution in [24, 33] {
+                let fast = reconstruct(&field, resolution, ExtractionMethod::Fast).unwrap();
+                let dense = reconstruct(&field, resolution, ExtractionMethod::Dense).unwrap();
+                assert_eq!(
+                    fast.mesh.triangles, dense.mesh.triangles,
+                    "R = {resolution}"
+                );
+                assert_eq!(fast.mesh.positions.len(), dense.mesh.positions.len());
+                for (a, b) in fast.mesh.positions.iter().zip(&dense.mesh.positions) {
+                    for c in 0..3 {
+                        assert!((a[c] - b[c]).abs() <= 1e-5, "{a:?} vs {b:?}");
+                    }
+                }
+                assert!(fast.evaluations.total() < dense.evaluations.total());
+                assert!(fast.mesh.edge_report().is_closed_and_oriented());
+            }
+        }
     }
 }
