@@ -4,6 +4,7 @@
 pub mod chamfer;
 pub mod mesh;
 pub mod normalize;
+pub mod point_tree;
 pub mod sampling;
 #[cfg(test)]
 pub(crate) mod test_shapes;
