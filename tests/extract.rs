@@ -7,23 +7,6 @@ use aortagen::extract::{
 };
 use aortagen::geometry::TriMesh;
 
-/// Triangles as position triples (rotated to start at their smallest vertex, orientation kept),
-/// sorted: two meshes are the same surface when these lists match.
-fn canonical_triangles(mesh: &TriMesh) -> Vec<[[f32; 3]; 3]> {
-    let key = |p: &[f32; 3]| p.map(f32::to_bits);
-    let mut out: Vec<[[f32; 3]; 3]> = mesh
-        .triangles
-        .iter()
-        .map(|t| {
-            let p = t.map(|v| mesh.positions[v as usize]);
-            let first = (0..3).min_by_key(|&k| key(&p[k])).unwrap();
-            std::array::from_fn(|k| p[(first + k) % 3])
-        })
-        .collect();
-    out.sort_by_key(|t| t.map(|p| key(&p)));
-    out
-}
-
 fn assert_same_surface(sparse: &TriMesh, dense: &TriMesh, what: &str) {
     assert_eq!(
         sparse.triangle_count(),
@@ -35,12 +18,7 @@ fn assert_same_surface(sparse: &TriMesh, dense: &TriMesh, what: &str) {
         dense.vertex_count(),
         "{what}: vertex count"
     );
-    let (a, b) = (canonical_triangles(sparse), canonical_triangles(dense));
-    let worst = a
-        .iter()
-        .zip(&b)
-        .flat_map(|(s, d)| (0..3).flat_map(move |v| (0..3).map(move |c| (s[v][c] - d[v][c]).abs())))
-        .fold(0.0f32, f32::max);
+    let worst = sparse.max_surface_difference(dense).unwrap();
     assert!(worst <= 1e-5, "{what}: vertices differ by {worst}");
 }
 

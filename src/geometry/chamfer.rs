@@ -3,91 +3,81 @@
 //! both directed means, no factor ½. Reported in the coordinates of the points (unit-ball
 //! coordinates everywhere in aortagen).
 //!
-//! Each set is indexed once by a k-d tree ([`ChamferIndex`]); queries run in fixed chunks
-//! whose f64 partial sums are added in order, so results do not depend on the thread count.
+//! Each set is indexed once by a k-d tree ([`ChamferIndex`]); the points of one set query
+//! the other's tree a leaf at a time, in fixed tasks whose f64 partial sums are added in
+//! order, so results do not depend on the thread count.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
 use super::mesh::TriMesh;
+use super::point_tree::{LEAF, PointTree};
 use super::sampling::sample_surface;
 
 /// Points sampled per surface for a Chamfer distance (DeepSDF's evaluation uses 30 000).
 pub const DEFAULT_CHAMFER_POINTS: usize = 30_000;
 
-/// Queries per parallel task; fixed so the summation order is fixed.
-const QUERY_CHUNK: usize = 2048;
-
-type Tree = ImmutableKdTree<f32, 3>;
+/// Query leaves per parallel task; fixed so the summation order is fixed.
+const LEAVES_PER_TASK: usize = 16;
 
 /// A point set with its nearest-neighbour tree, built once and queried many times.
 pub struct ChamferIndex {
-    tree: Option<Tree>,
-    /// The points in the tree's leaf order: neighbouring queries visit neighbouring leaves
-    /// when this set is used as the query side, which keeps the other tree in cache.
-    ordered: Vec<[f32; 3]>,
+    tree: PointTree,
 }
 
 impl ChamferIndex {
     /// Indexes `points` (any order; an empty set is allowed).
     pub fn new(points: &[[f32; 3]]) -> Self {
-        // Only an index overflow (more than u32::MAX points) can fail construction.
-        let tree = Tree::new_from_slice(points).ok().filter(|t| t.size() > 0);
-        let ordered = match &tree {
-            Some(t) => t.iter().map(|(_, p)| p).collect(),
-            None => Vec::new(),
-        };
-        Self { tree, ordered }
+        Self {
+            tree: PointTree::new(points),
+        }
     }
 
     /// Number of indexed points.
     pub fn len(&self) -> usize {
-        self.ordered.len()
+        self.tree.points().len()
     }
 
     /// Whether the set is empty.
     pub fn is_empty(&self) -> bool {
-        self.ordered.is_empty()
+        self.tree.points().is_empty()
     }
 
     /// The indexed points (in tree order, not input order).
     pub fn points(&self) -> &[[f32; 3]] {
-        &self.ordered
+        self.tree.points()
     }
 
     /// Squared distance from `q` to the nearest indexed point (∞ for an empty set).
     pub fn nearest_squared(&self, q: &[f32; 3]) -> f64 {
-        match &self.tree {
-            Some(t) => {
-                t.query(q)
-                    .nearest_one::<SquaredEuclidean<f64>>()
-                    .execute()
-                    .distance
-            }
-            None => f64::INFINITY,
-        }
+        self.tree.nearest_squared(q)
     }
 
-    /// `mean_q min_p ‖q−p‖²` over `queries`, computed in parallel.
+    /// `mean_q min_p ‖q−p‖²` over `queries`, computed in parallel (∞ for an empty index,
+    /// NaN for no queries).
     pub fn mean_squared_distance_from(&self, queries: &[[f32; 3]]) -> f64 {
-        let partial: Vec<f64> = queries
-            .par_chunks(QUERY_CHUNK)
-            .map(|chunk| self.sum_squared(chunk))
-            .collect();
+        self.mean_from_index(&ChamferIndex::new(queries), true)
+    }
+
+    /// Mean over the points of `queries`, a leaf (a compact block of points) at a time.
+    fn mean_from_index(&self, queries: &ChamferIndex, parallel: bool) -> f64 {
+        let leaves = queries.tree.leaf_count();
+        let task = |t: usize| {
+            let mut out = [0.0; LEAF];
+            let mut sum = 0.0;
+            for l in t * LEAVES_PER_TASK..((t + 1) * LEAVES_PER_TASK).min(leaves) {
+                let block = queries.tree.leaf_points(l);
+                self.tree.nearest_block(block, &mut out);
+                sum += out[..block.len()].iter().sum::<f64>();
+            }
+            sum
+        };
+        let tasks = leaves.div_ceil(LEAVES_PER_TASK);
+        let partial: Vec<f64> = if parallel {
+            (0..tasks).into_par_iter().map(task).collect()
+        } else {
+            (0..tasks).map(task).collect()
+        };
         partial.iter().sum::<f64>() / queries.len() as f64
-    }
-
-    /// The same mean on the calling thread only (for callers that parallelise outside).
-    fn mean_squared_distance_serial(&self, queries: &[[f32; 3]]) -> f64 {
-        let total: f64 = queries
-            .chunks(QUERY_CHUNK)
-            .map(|chunk| self.sum_squared(chunk))
-            .sum();
-        total / queries.len() as f64
-    }
-
-    fn sum_squared(&self, queries: &[[f32; 3]]) -> f64 {
-        queries.iter().map(|q| self.nearest_squared(q)).sum()
     }
 }
 
@@ -97,10 +87,7 @@ pub fn chamfer_between(a: &ChamferIndex, b: &ChamferIndex) -> f64 {
     if a.is_empty() || b.is_empty() {
         return f64::INFINITY;
     }
-    let (ab, ba) = rayon::join(
-        || b.mean_squared_distance_from(a.points()),
-        || a.mean_squared_distance_from(b.points()),
-    );
+    let (ab, ba) = rayon::join(|| b.mean_from_index(a, true), || a.mean_from_index(b, true));
     ab + ba
 }
 
@@ -109,7 +96,7 @@ fn chamfer_between_serial(a: &ChamferIndex, b: &ChamferIndex) -> f64 {
     if a.is_empty() || b.is_empty() {
         return f64::INFINITY;
     }
-    b.mean_squared_distance_serial(a.points()) + a.mean_squared_distance_serial(b.points())
+    b.mean_from_index(a, false) + a.mean_from_index(b, false)
 }
 
 /// Chamfer distance between two point sets (DESIGN §3). Either set empty → ∞.

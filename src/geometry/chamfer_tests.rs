@@ -13,22 +13,24 @@ fn random_points(n: usize, seed: u64, scale: f32) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// mean over `from` of the squared distance to the nearest point of `to`, in f64.
+fn directed_brute_force(from: &[[f32; 3]], to: &[[f32; 3]]) -> f64 {
+    from.iter()
+        .map(|p| {
+            to.iter()
+                .map(|q| {
+                    (0..3)
+                        .map(|k| (f64::from(p[k]) - f64::from(q[k])).powi(2))
+                        .sum::<f64>()
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .sum::<f64>()
+        / from.len() as f64
+}
+
 fn brute_force(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
-    let directed = |from: &[[f32; 3]], to: &[[f32; 3]]| {
-        from.iter()
-            .map(|p| {
-                to.iter()
-                    .map(|q| {
-                        (0..3)
-                            .map(|k| (f64::from(p[k]) - f64::from(q[k])).powi(2))
-                            .sum::<f64>()
-                    })
-                    .fold(f64::INFINITY, f64::min)
-            })
-            .sum::<f64>()
-            / from.len() as f64
-    };
-    directed(a, b) + directed(b, a)
+    directed_brute_force(a, b) + directed_brute_force(b, a)
 }
 
 fn assert_close(x: f64, y: f64, rel: f64) {
@@ -136,4 +138,29 @@ fn sampling_floor_on_a_sphere_is_small_and_positive() {
     let a = crate::geometry::sampling::sample_surface(&sphere, n, 1);
     let b = crate::geometry::sampling::sample_surface(&moved, n, 2);
     assert!(chamfer_distance(&a.points, &b.points) > 10.0 * floor);
+}
+
+#[test]
+fn single_queries_and_duplicate_points_match_brute_force() {
+    // Many exact duplicates and a flat cluster stress ties and zero-extent boxes.
+    let mut a = random_points(700, 30, 1.0);
+    a.extend(std::iter::repeat_n([0.25, 0.25, 0.25], 300));
+    a.extend(
+        random_points(300, 31, 1.0)
+            .into_iter()
+            .map(|p| [p[0], p[1], 0.0]),
+    );
+    let b = random_points(900, 32, 1.2);
+    let index = ChamferIndex::new(&a);
+    assert_eq!(index.len(), a.len());
+    for q in b.iter().take(200) {
+        assert_close(
+            index.nearest_squared(q),
+            directed_brute_force(&[*q], &a),
+            1e-12,
+        );
+    }
+    let mean = index.mean_squared_distance_from(&b);
+    assert_close(mean, directed_brute_force(&b, &a), 1e-9);
+    assert_close(chamfer_distance(&a, &b), brute_force(&a, &b), 1e-9);
 }

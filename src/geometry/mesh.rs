@@ -268,6 +268,42 @@ impl TriMesh {
             .collect()
     }
 
+    /// Triangles as position triples, each rotated to start at its smallest vertex
+    /// (orientation kept), sorted: two meshes are the same surface, whatever their vertex
+    /// numbering, when these lists match.
+    pub fn canonical_triangles(&self) -> Vec<[[f32; 3]; 3]> {
+        let key = |p: &[f32; 3]| p.map(f32::to_bits);
+        let mut out: Vec<[[f32; 3]; 3]> = self
+            .triangles
+            .iter()
+            .map(|t| {
+                let p = t.map(|v| self.positions[v as usize]);
+                let first = (0..3).min_by_key(|&k| key(&p[k])).unwrap_or(0);
+                std::array::from_fn(|k| p[(first + k) % 3])
+            })
+            .collect();
+        out.sort_by_key(|t| t.map(|p| key(&p)));
+        out
+    }
+
+    /// Largest coordinate difference between two meshes' canonical triangles, or `None`
+    /// when their vertex or triangle counts differ.
+    pub fn max_surface_difference(&self, other: &TriMesh) -> Option<f32> {
+        if self.vertex_count() != other.vertex_count()
+            || self.triangle_count() != other.triangle_count()
+        {
+            return None;
+        }
+        let (a, b) = (self.canonical_triangles(), other.canonical_triangles());
+        Some(
+            a.iter()
+                .zip(&b)
+                .flat_map(|(s, d)| s.iter().zip(d).flat_map(|(p, q)| p.iter().zip(q)))
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max),
+        )
+    }
+
     /// Applies `p ↦ p·scale + offset` to every vertex (normals are unchanged for scale > 0).
     pub fn scale_and_translate(&mut self, scale: f64, offset: [f64; 3]) {
         for p in &mut self.positions {

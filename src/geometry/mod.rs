@@ -8,6 +8,7 @@ pub(crate) mod mc_dense;
 pub(crate) mod mc_tables;
 pub mod mesh;
 pub mod normalize;
+pub mod point_tree;
 pub mod sampling;
 #[cfg(test)]
 pub(crate) mod test_shapes;
