@@ -7,6 +7,7 @@
 pub mod cli;
 pub mod config;
 pub mod db;
+pub mod engine;
 pub mod extract;
 pub mod formats;
 pub mod geometry;

@@ -4,6 +4,7 @@ use std::sync::Arc;
 
 use crate::config::Config;
 use crate::jobs::engine::CohortEngine;
+use crate::sdf::backend::Backend;
 use crate::startup::{Application, shutdown_signal};
 
 /// Arguments of `aortagen serve`.
@@ -28,7 +29,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     })
 }
 
-/// The science engine the service runs on.
+/// The science engine the service runs on: the trained SDF models.
 fn engine() -> Arc<dyn CohortEngine> {
-    Arc::new(crate::jobs::engine::UnavailableEngine)
+    Arc::new(crate::engine::SdfEngine::new(Backend::default()))
 }

@@ -29,6 +29,7 @@ pub struct EvaluationSettings {
     /// Seed of those samplings.
     pub seed: u64,
     /// Fast (coarse-to-fine) or dense extraction of the reconstructed surface.
+    #[serde(default)]
     pub extraction: ExtractionMethod,
 }
 

@@ -1,0 +1,181 @@
+//! The science engine behind the service: trained SDF models, fast surface extraction and
+//! Chamfer metrics, exposed through [`CohortEngine`] so the job worker calls the very library
+//! code the command line uses.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+use anyhow::{Context, bail};
+use rayon::prelude::*;
+
+use crate::geometry::TriMesh;
+use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
+use crate::geometry::sampling::sample_surface;
+use crate::jobs::engine::{
+    CohortEngine, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo, TrainingSpec,
+};
+use crate::sdf::backend::Backend;
+use crate::sdf::config::Preset;
+use crate::sdf::data::DataSource;
+use crate::sdf::evaluation::EvaluationReport;
+use crate::sdf::generate::Mixture;
+use crate::sdf::reconstruct::{ExtractionMethod, reconstruct};
+use crate::sdf::store::LoadedModel;
+use crate::sdf::training::{Silent, TrainingRequest, train};
+
+/// File in a model directory holding `aortagen evaluate --json` output; when present, its
+/// per-shape reconstruction Chamfer distances are reported with the model.
+pub const EVALUATION_FILE: &str = "evaluation.json";
+
+/// A loaded model with its latents on the host, shared by all workers.
+struct CachedModel {
+    model: LoadedModel,
+    latents: Vec<Vec<f32>>,
+}
+
+/// The [`CohortEngine`] backed by trained neural SDF models.
+pub struct SdfEngine {
+    backend: Backend,
+    extraction: ExtractionMethod,
+    chamfer_points: usize,
+    /// Loaded models by directory, so each shape does not reload the weights. A model
+    /// directory's content never changes once registered.
+    models: Mutex<HashMap<PathBuf, Arc<Mutex<CachedModel>>>>,
+}
+
+impl SdfEngine {
+    /// An engine computing on `backend` with the fast extraction and 30 000-point Chamfer.
+    pub fn new(backend: Backend) -> Self {
+        Self {
+            backend,
+            extraction: ExtractionMethod::Fast,
+            chamfer_points: DEFAULT_CHAMFER_POINTS,
+            models: Mutex::new(HashMap::new()),
+        }
+    }
+
+    /// Uses `points` surface samples per shape for the cohort's pairwise Chamfer distances.
+    pub fn with_chamfer_points(mut self, points: usize) -> Self {
+        self.chamfer_points = points.max(1);
+        self
+    }
+
+    fn model(&self, dir: &Path) -> anyhow::Result<Arc<Mutex<CachedModel>>> {
+        let mut models = self
+            .models
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model cache poisoned"))?;
+        if let Some(model) = models.get(dir) {
+            return Ok(model.clone());
+        }
+        let model = LoadedModel::load(dir, self.backend)
+            .with_context(|| format!("cannot load the model in {}", dir.display()))?;
+        let latents = model.latents();
+        let cached = Arc::new(Mutex::new(CachedModel { model, latents }));
+        models.insert(dir.to_path_buf(), cached.clone());
+        Ok(cached)
+    }
+}
+
+impl CohortEngine for SdfEngine {
+    fn model_info(&self, model_dir: &Path) -> anyhow::Result<ModelInfo> {
+        let cached = self.model(model_dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        let manifest = &cached.model.manifest;
+        let fidelity = read_reconstruction_cds(model_dir);
+        let training_shapes = manifest
+            .shapes
+            .iter()
+            .enumerate()
+            .map(|(index, shape)| TrainingShapeInfo {
+                index,
+                name: shape.name.clone(),
+                reconstruction_cd: fidelity.get(index).copied().flatten(),
+            })
+            .collect();
+        Ok(ModelInfo {
+            latent_dim: manifest.architecture.latent_dim,
+            architecture: serde_json::to_value(&manifest.architecture)?,
+            training_shapes,
+        })
+    }
+
+    fn generate_shape(
+        &self,
+        model_dir: &Path,
+        spec: &ShapeSpec,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<GeneratedShape> {
+        if cancel.load(Ordering::Relaxed) {
+            bail!("cancelled");
+        }
+        let cached = self.model(model_dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        let shapes = cached.latents.len();
+        if let Some(&bad) = spec.training_indices.iter().find(|&&i| i >= shapes) {
+            bail!("training index {bad} is out of range: the model has {shapes} shapes");
+        }
+        let mixture = Mixture {
+            indices: spec.training_indices.clone(),
+            weights: spec.weights.clone(),
+        };
+        let transform = mixture.mix_transforms(&cached.model.manifest.transforms())?;
+        let field = cached.model.field(&mixture.mix_latents(&cached.latents))?;
+        let extraction = reconstruct(&field, spec.resolution, self.extraction)?;
+        let mesh_unit = extraction.mesh;
+        let mesh_mm = transform.mesh_to_mesh_units(&mesh_unit);
+        Ok(GeneratedShape {
+            area_mm2: mesh_mm.area(),
+            volume_mm3: mesh_mm.signed_volume(),
+            mesh_unit,
+            transform,
+        })
+    }
+
+    fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>> {
+        let sets: Vec<Vec<[f32; 3]>> = meshes
+            .par_iter()
+            .enumerate()
+            .map(|(i, mesh)| {
+                sample_surface(mesh, self.chamfer_points, seed.wrapping_add(i as u64)).points
+            })
+            .collect();
+        if let Some(i) = sets.iter().position(Vec::is_empty) {
+            bail!("shape {i} has no surface to sample");
+        }
+        Ok(pairwise_chamfer(&sets))
+    }
+
+    fn train_model(&self, spec: &TrainingSpec, cancel: &AtomicBool) -> anyhow::Result<ModelInfo> {
+        let request = TrainingRequest {
+            out_dir: spec.model_dir.clone(),
+            source: DataSource::Directory {
+                path: spec.input_dir.clone(),
+            },
+            setup: Preset::Cpu.setup(spec.seed),
+            backend: self.backend,
+            resume: false,
+            stop: Some(cancel),
+        };
+        let outcome = train(&request, &mut Silent)?;
+        if !outcome.finished {
+            bail!("training was stopped before its last epoch");
+        }
+        self.model_info(&spec.model_dir)
+    }
+}
+
+/// Per-shape reconstruction CDs from the model's `evaluation.json`, if it has one.
+fn read_reconstruction_cds(model_dir: &Path) -> Vec<Option<f64>> {
+    std::fs::read(model_dir.join(EVALUATION_FILE))
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<EvaluationReport>(&bytes).ok())
+        .map(|report| report.shapes.iter().map(|s| s.chamfer).collect())
+        .unwrap_or_default()
+}
