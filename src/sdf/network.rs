@@ -251,13 +251,31 @@ impl SdfNetwork {
         let points = Tensor::from_data(TensorData::new(points, [n, 3]), (&device, dtype));
         let zero = Tensor::zeros([1, self.latent_dim], (&device, dtype));
         let offsets = self.latent_offsets(zero);
+        // Read back and rebuild the bias as a fresh leaf, so no autodiff graph of this
+        // calibration stays attached to the parameters.
         let mean = self.evaluate(&offsets, points, false).values.mean();
+        let mean: f64 = mean
+            .into_data()
+            .convert::<f64>()
+            .to_vec::<f64>()
+            .expect("f64")[0];
         let last = self.layers.len() - 1;
         let bias = self.layers[last]
             .bias
             .take()
             .expect("SDF layers have biases");
-        self.layers[last].bias = Some(bias.map(|b| b - mean));
+        let value: Vec<f64> = bias
+            .val()
+            .into_data()
+            .convert::<f64>()
+            .to_vec()
+            .expect("f64");
+        let value: Vec<f64> = value.iter().map(|b| b - mean).collect();
+        let len = value.len();
+        self.layers[last].bias = Some(Param::from_tensor(Tensor::from_data(
+            TensorData::new(value, [len]),
+            (&device, dtype),
+        )));
         self
     }
 
@@ -602,7 +620,10 @@ mod tests {
                 let cos = (gi[0] * d[0] + gi[1] * d[1] + gi[2] * d[2]) / norm;
                 // Near the origin the smoothed cone's gradient is small and less radial.
                 let min_cos = if rho < 0.3 { 0.5 } else { 0.8 };
-                assert!(cos > min_cos, "ρ = {rho}, direction {i}: cos(∇f, x̂) = {cos}");
+                assert!(
+                    cos > min_cos,
+                    "ρ = {rho}, direction {i}: cos(∇f, x̂) = {cos}"
+                );
                 if let Some(prev) = &previous {
                     assert!(f[i] > prev[i], "ρ = {rho}, direction {i}: f not increasing");
                 }
