@@ -412,7 +412,13 @@ pub(crate) mod test_support {
                     .collect();
                 let noise =
                     Tensor::from_data(TensorData::new(noise, shape), (&t.device(), t.dtype()));
-                t + noise
+                // A fresh leaf, so autodiff reports gradients under the parameter's id.
+                let sum = (t + noise).detach();
+                if sum.device().is_autodiff() {
+                    sum.require_grad()
+                } else {
+                    sum
+                }
             })
         }
     }
