@@ -138,7 +138,7 @@ impl SdfField {
 fn to_f32(t: Tensor<2>) -> Vec<f32> {
     t.into_data()
         .convert::<f32>()
-        .into_vec::<f32>()
+        .try_into_vec::<f32>()
         .expect("converted to f32")
 }
 

@@ -95,7 +95,7 @@ impl TrainingBatch {
             });
         }
         let per_shape = |what, len: usize| {
-            if len % b == 0 {
+            if len.is_multiple_of(b) {
                 Ok(len / b)
             } else {
                 Err(BatchError::Length {
@@ -275,7 +275,7 @@ mod tests {
         let terms = igr_loss(&model, &batch, &IgrLossConfig::new()).unwrap();
         let grads = GradientsParams::from_grads(terms.total.backward(), &model);
 
-        let mut check = |name: &str, analytic: Vec<f64>, fd: &dyn Fn(usize) -> f64, idx: usize| {
+        let check = |name: &str, analytic: Vec<f64>, fd: &dyn Fn(usize) -> f64, idx: usize| {
             let (a, f) = (analytic[idx], fd(idx));
             assert!(
                 (a - f).abs() <= 1e-6 * (1.0 + f.abs()),

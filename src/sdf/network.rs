@@ -257,7 +257,7 @@ impl SdfNetwork {
         let mean: f64 = mean
             .into_data()
             .convert::<f64>()
-            .to_vec::<f64>()
+            .try_to_vec::<f64>()
             .expect("f64")[0];
         let last = self.layers.len() - 1;
         let bias = self.layers[last]
@@ -268,7 +268,7 @@ impl SdfNetwork {
             .val()
             .into_data()
             .convert::<f64>()
-            .to_vec()
+            .try_to_vec()
             .expect("f64");
         let value: Vec<f64> = value.iter().map(|b| b - mean).collect();
         let len = value.len();
@@ -441,7 +441,10 @@ pub(crate) mod test_support {
 
     /// Tensor → host f64 values (row-major).
     pub fn to_f64<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-        t.into_data().convert::<f64>().into_vec::<f64>().unwrap()
+        t.into_data()
+            .convert::<f64>()
+            .try_into_vec::<f64>()
+            .unwrap()
     }
 
     /// `n` points uniform in [-r, r]³.

@@ -62,7 +62,7 @@ impl ScalarF32 for Tensor<1> {
     fn into_scalar_as_f32(self) -> f32 {
         self.into_data()
             .convert::<f32>()
-            .to_vec::<f32>()
+            .try_to_vec::<f32>()
             .map_or(f32::NAN, |v| v[0])
     }
 }
