@@ -11,21 +11,18 @@ use std::str::FromStr;
 use burn::tensor::Device;
 
 /// A compute backend that can run the SDF network.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Backend {
     /// burn's Flex backend (gemm matrix kernels with AVX-512 when the CPU has it): the fastest
     /// on the reference machine for training and inference, hence the default.
+    #[default]
     Flex,
     /// burn's NdArray backend (matrixmultiply kernels); deprecated upstream, kept to compare
     /// and as a fallback.
     NdArray,
-}
-
-impl Default for Backend {
-    fn default() -> Self {
-        Backend::Flex
-    }
 }
 
 /// Why a backend cannot be used.

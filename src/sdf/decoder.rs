@@ -85,7 +85,7 @@ impl SdfAutoDecoder {
             .val()
             .into_data()
             .convert::<f32>()
-            .into_vec()
+            .try_into_vec()
             .expect("latent table converts to f32");
         flat.chunks(d).map(<[f32]>::to_vec).collect()
     }

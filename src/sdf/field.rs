@@ -138,6 +138,128 @@ impl SdfField {
 fn to_f32(t: Tensor<2>) -> Vec<f32> {
     t.into_data()
         .convert::<f32>()
-        .into_vec::<f32>()
+        .try_into_vec::<f32>()
         .expect("converted to f32")
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::tensor::DType;
+
+    use super::*;
+    use crate::sdf::network::SdfNetworkConfig;
+    use crate::sdf::network::test_support::{perturbed, random_points, tensor2, to_f64};
+    use crate::sdf::{Backend, SdfAutoDecoder};
+
+    fn model(backend: Backend) -> SdfAutoDecoder {
+        let device = backend.device(false).unwrap();
+        let config = SdfNetworkConfig::new().with_latent_dim(8).with_hidden(32);
+        let model = SdfAutoDecoder::new(&config, 3, 4, &device).unwrap();
+        perturbed(model, 8, 0.05)
+    }
+
+    fn field_values(field: &SdfField, points: &[[f32; 3]]) -> (Vec<f32>, Vec<[f32; 3]>) {
+        let mut values = vec![0.0; points.len()];
+        let mut grads = vec![[0.0; 3]; points.len()];
+        field.eval_batch(points, &mut values, Some(&mut grads));
+        (values, grads)
+    }
+
+    fn points(n: usize) -> Vec<[f32; 3]> {
+        random_points(n, 1.0, 17)
+            .iter()
+            .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
+            .collect()
+    }
+
+    #[test]
+    fn field_equals_the_training_forward() {
+        let model = model(Backend::Flex);
+        let pts = points(50);
+        // Training path: gathered latent row 2, offsets for a batch of one shape.
+        let offsets = model.network.latent_offsets(model.gather_latents(&[2]));
+        let rows: Vec<Vec<f64>> = pts
+            .iter()
+            .map(|p| p.iter().map(|&c| c as f64).collect())
+            .collect();
+        let x = tensor2(&rows, &model.network.device(), DType::F32);
+        let out = model.network.evaluate(&offsets, x, true);
+        let (f_ref, g_ref) = (to_f64(out.values), to_f64(out.gradients.unwrap()));
+        // Chunks of 7 so that chunk boundaries are exercised.
+        let latent = model.latents_to_vec().swap_remove(2);
+        let field = SdfField::new(&model.network, &latent)
+            .unwrap()
+            .with_chunk_points(7);
+        let (f, g) = field_values(&field, &pts);
+        for i in 0..pts.len() {
+            assert!(
+                (f[i] as f64 - f_ref[i]).abs() < 1e-5,
+                "f at {i}: {} vs {}",
+                f[i],
+                f_ref[i]
+            );
+            for k in 0..3 {
+                assert!(
+                    (g[i][k] as f64 - g_ref[3 * i + k]).abs() < 1e-5,
+                    "∇f at {i}"
+                );
+            }
+        }
+        let mut only_f = vec![0.0; pts.len()];
+        field.eval_batch(&pts, &mut only_f, None);
+        assert_eq!(only_f, f);
+    }
+
+    #[test]
+    fn flex_and_ndarray_give_the_same_field() {
+        if !(Backend::Flex.is_compiled() && Backend::NdArray.is_compiled()) {
+            return;
+        }
+        let pts = points(200);
+        let eval = |backend| {
+            let model = model(backend);
+            let latent = model.latents_to_vec().swap_remove(1);
+            field_values(&SdfField::new(&model.network, &latent).unwrap(), &pts)
+        };
+        let (f1, g1) = eval(Backend::Flex);
+        let (f2, g2) = eval(Backend::NdArray);
+        for i in 0..pts.len() {
+            assert!(
+                (f1[i] - f2[i]).abs() < 1e-4,
+                "f at {i}: flex {} ndarray {}",
+                f1[i],
+                f2[i]
+            );
+            for k in 0..3 {
+                assert!(
+                    (g1[i][k] - g2[i][k]).abs() < 1e-4,
+                    "∇f at {i}: {:?} {:?}",
+                    g1[i],
+                    g2[i]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn wrong_sizes_are_reported() {
+        let model = model(Backend::Flex);
+        assert_eq!(
+            SdfField::new(&model.network, &[0.0; 3]).unwrap_err(),
+            FieldError::LatentLength {
+                len: 3,
+                expected: 8
+            }
+        );
+        let field = SdfField::new(&model.network, &[0.0; 8]).unwrap();
+        let mut values = vec![0.0; 2];
+        assert_eq!(
+            field.try_eval_batch(&points(3), &mut values, None),
+            Err(FieldError::BufferLength {
+                what: "values",
+                len: 2,
+                points: 3
+            })
+        );
+    }
 }

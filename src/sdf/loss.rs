@@ -95,7 +95,7 @@ impl TrainingBatch {
             });
         }
         let per_shape = |what, len: usize| {
-            if len % b == 0 {
+            if len.is_multiple_of(b) {
                 Ok(len / b)
             } else {
                 Err(BatchError::Length {
@@ -202,4 +202,217 @@ pub fn igr_loss(
         eikonal,
         latent,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::Param;
+    use burn::optim::GradientsParams;
+    use burn::tensor::{DType, Tensor, TensorData};
+
+    use super::*;
+    use crate::sdf::Backend;
+    use crate::sdf::network::SdfNetworkConfig;
+    use crate::sdf::network::test_support::{perturbed, random_points, to_f64};
+
+    fn p3(v: &[f64]) -> [f32; 3] {
+        [v[0] as f32, v[1] as f32, v[2] as f32]
+    }
+
+    fn tiny_batch() -> TrainingBatch {
+        let surface: Vec<[f32; 3]> = random_points(8, 0.8, 21).iter().map(|p| p3(p)).collect();
+        let normals = random_points(8, 1.0, 22)
+            .iter()
+            .map(|p| {
+                let n = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                p3(&p.iter().map(|c| c / n).collect::<Vec<_>>())
+            })
+            .collect();
+        let eikonal = random_points(6, 1.0, 23).iter().map(|p| p3(p)).collect();
+        TrainingBatch {
+            shape_indices: vec![1, 0],
+            surface_points: surface,
+            surface_normals: normals,
+            eikonal_points: eikonal,
+        }
+    }
+
+    fn loss_value(model: &SdfAutoDecoder, batch: &TrainingBatch) -> f64 {
+        to_f64(igr_loss(model, batch, &IgrLossConfig::new()).unwrap().total)[0]
+    }
+
+    /// Central difference of the loss w.r.t. entry `index` of the parameter chosen by `pick`.
+    fn finite_difference<const D: usize>(
+        model: &SdfAutoDecoder,
+        batch: &TrainingBatch,
+        pick: fn(&mut SdfAutoDecoder) -> &mut Param<Tensor<D>>,
+        index: usize,
+    ) -> f64 {
+        let h = 1e-6;
+        let shifted = |s: f64| {
+            let mut m = model.clone();
+            let param = pick(&mut m);
+            let p = param.clone();
+            *param = p.map(|t| {
+                let shape = t.shape();
+                let mut onehot = vec![0.0; shape.num_elements()];
+                onehot[index] = s;
+                t.clone()
+                    + Tensor::from_data(TensorData::new(onehot, shape), (&t.device(), t.dtype()))
+            });
+            loss_value(&m, batch)
+        };
+        (shifted(h) - shifted(-h)) / (2.0 * h)
+    }
+
+    #[test]
+    fn parameter_gradients_of_the_loss_match_finite_differences() {
+        let device = Backend::Flex.device(true).unwrap();
+        let config = SdfNetworkConfig::new().with_latent_dim(4).with_hidden(12);
+        let model = SdfAutoDecoder::new_with_dtype(&config, 3, 5, &device, DType::F64).unwrap();
+        let model = perturbed(model, 6, 0.1);
+        let batch = tiny_batch();
+        let terms = igr_loss(&model, &batch, &IgrLossConfig::new()).unwrap();
+        let grads = GradientsParams::from_grads(terms.total.backward(), &model);
+
+        let check = |name: &str, analytic: Vec<f64>, fd: &dyn Fn(usize) -> f64, idx: usize| {
+            let (a, f) = (analytic[idx], fd(idx));
+            assert!(
+                (a - f).abs() <= 1e-6 * (1.0 + f.abs()),
+                "{name}[{idx}]: autodiff {a} vs FD {f}"
+            );
+        };
+        let w = |l: usize| -> Vec<f64> {
+            to_f64(grads.get::<2>(model.network.layers[l].weight.id).unwrap())
+        };
+        // Layer 0 is [7, 12]: rows 0..4 multiply z, rows 4..7 multiply x.
+        check(
+            "layer0.weight(z row)",
+            w(0),
+            &|i| finite_difference(&model, &batch, |m| &mut m.network.layers[0].weight, i),
+            12 + 5,
+        );
+        check(
+            "layer0.weight(x row)",
+            w(0),
+            &|i| finite_difference(&model, &batch, |m| &mut m.network.layers[0].weight, i),
+            5 * 12 + 2,
+        );
+        // Skip layer 4 is [12, 12]: rows 0..5 activation, 5..9 z, 9..12 x.
+        for i in [2 * 12 + 3, 6 * 12 + 1, 10 * 12 + 7] {
+            check(
+                "layer4.weight",
+                w(4),
+                &|i| finite_difference(&model, &batch, |m| &mut m.network.layers[4].weight, i),
+                i,
+            );
+        }
+        check(
+            "layer6.weight",
+            w(6),
+            &|i| finite_difference(&model, &batch, |m| &mut m.network.layers[6].weight, i),
+            40,
+        );
+        check(
+            "output.weight",
+            w(8),
+            &|i| finite_difference(&model, &batch, |m| &mut m.network.layers[8].weight, i),
+            3,
+        );
+        let bias = to_f64(
+            grads
+                .get::<1>(model.network.layers[2].bias.as_ref().unwrap().id)
+                .unwrap(),
+        );
+        check(
+            "layer2.bias",
+            bias,
+            &|i| {
+                finite_difference(
+                    &model,
+                    &batch,
+                    |m| m.network.layers[2].bias.as_mut().unwrap(),
+                    i,
+                )
+            },
+            4,
+        );
+        let latents = to_f64(grads.get::<2>(model.latents.id).unwrap());
+        // Shape 1 is in the batch (row 1), shape 2 is not: its gradient is exactly zero.
+        check(
+            "latents",
+            latents.clone(),
+            &|i| finite_difference(&model, &batch, |m| &mut m.latents, i),
+            4 + 2,
+        );
+        assert!(
+            latents[8..12].iter().all(|&g| g == 0.0),
+            "unused latent row got a gradient"
+        );
+    }
+
+    #[test]
+    fn loss_terms_add_up_and_match_a_direct_evaluation() {
+        let device = Backend::Flex.device(false).unwrap();
+        let config = SdfNetworkConfig::new().with_latent_dim(4).with_hidden(12);
+        let model = SdfAutoDecoder::new_with_dtype(&config, 2, 1, &device, DType::F64).unwrap();
+        let model = perturbed(model, 2, 0.1);
+        let batch = tiny_batch();
+        let cfg = IgrLossConfig::new();
+        let terms = igr_loss(&model, &batch, &cfg).unwrap();
+        let get = |t: &Tensor<1>| to_f64(t.clone())[0];
+        let sum =
+            get(&terms.surface) + get(&terms.normal) + get(&terms.eikonal) + get(&terms.latent);
+        assert!((get(&terms.total) - sum).abs() < 1e-12);
+        // λ·mean‖z‖ over the batch's shapes (1 and 0), computed on the host.
+        let z = model.latents_to_vec();
+        let norm = |v: &Vec<f32>| v.iter().map(|&c| (c as f64).powi(2)).sum::<f64>().sqrt();
+        let expected = cfg.lambda * (norm(&z[1]) + norm(&z[0])) / 2.0;
+        assert!((get(&terms.latent) - expected).abs() < 1e-9 * expected.max(1e-12) + 1e-12);
+    }
+
+    #[test]
+    fn malformed_batches_are_rejected_with_the_field_named() {
+        let b = tiny_batch();
+        assert_eq!(b.dims(2), Ok((2, 4, 3)));
+        assert_eq!(
+            b.dims(1),
+            Err(BatchError::ShapeIndex {
+                position: 0,
+                index: 1,
+                num_shapes: 1
+            })
+        );
+        let mut odd = b.clone();
+        odd.eikonal_points.pop();
+        assert!(matches!(
+            odd.dims(2),
+            Err(BatchError::Length {
+                what: "eikonal_points",
+                ..
+            })
+        ));
+        let mut normals = b.clone();
+        normals.surface_normals.pop();
+        assert!(matches!(
+            normals.dims(2),
+            Err(BatchError::Length {
+                what: "surface_normals",
+                ..
+            })
+        ));
+        let mut nan = b.clone();
+        nan.surface_points[3][1] = f32::NAN;
+        assert_eq!(
+            nan.dims(2),
+            Err(BatchError::NotFinite {
+                what: "surface_points",
+                row: 3
+            })
+        );
+        assert_eq!(
+            TrainingBatch::default().dims(2),
+            Err(BatchError::Empty("no shape_indices"))
+        );
+    }
 }

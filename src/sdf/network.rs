@@ -251,13 +251,31 @@ impl SdfNetwork {
         let points = Tensor::from_data(TensorData::new(points, [n, 3]), (&device, dtype));
         let zero = Tensor::zeros([1, self.latent_dim], (&device, dtype));
         let offsets = self.latent_offsets(zero);
+        // Read back and rebuild the bias as a fresh leaf, so no autodiff graph of this
+        // calibration stays attached to the parameters.
         let mean = self.evaluate(&offsets, points, false).values.mean();
+        let mean: f64 = mean
+            .into_data()
+            .convert::<f64>()
+            .try_to_vec::<f64>()
+            .expect("f64")[0];
         let last = self.layers.len() - 1;
         let bias = self.layers[last]
             .bias
             .take()
             .expect("SDF layers have biases");
-        self.layers[last].bias = Some(bias.map(|b| b - mean));
+        let value: Vec<f64> = bias
+            .val()
+            .into_data()
+            .convert::<f64>()
+            .try_to_vec()
+            .expect("f64");
+        let value: Vec<f64> = value.iter().map(|b| b - mean).collect();
+        let len = value.len();
+        self.layers[last].bias = Some(Param::from_tensor(Tensor::from_data(
+            TensorData::new(value, [len]),
+            (&device, dtype),
+        )));
         self
     }
 
@@ -394,7 +412,13 @@ pub(crate) mod test_support {
                     .collect();
                 let noise =
                     Tensor::from_data(TensorData::new(noise, shape), (&t.device(), t.dtype()));
-                t + noise
+                // A fresh leaf, so autodiff reports gradients under the parameter's id.
+                let sum = (t + noise).detach();
+                if sum.device().is_autodiff() {
+                    sum.require_grad()
+                } else {
+                    sum
+                }
             })
         }
     }
@@ -417,7 +441,10 @@ pub(crate) mod test_support {
 
     /// Tensor → host f64 values (row-major).
     pub fn to_f64<const D: usize>(t: Tensor<D>) -> Vec<f64> {
-        t.into_data().convert::<f64>().into_vec::<f64>().unwrap()
+        t.into_data()
+            .convert::<f64>()
+            .try_into_vec::<f64>()
+            .unwrap()
     }
 
     /// `n` points uniform in [-r, r]³.

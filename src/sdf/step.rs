@@ -62,7 +62,7 @@ impl ScalarF32 for Tensor<1> {
     fn into_scalar_as_f32(self) -> f32 {
         self.into_data()
             .convert::<f32>()
-            .to_vec::<f32>()
+            .try_to_vec::<f32>()
             .map_or(f32::NAN, |v| v[0])
     }
 }
@@ -136,5 +136,96 @@ impl SdfTrainer {
         let grads = GradientsParams::from_grads(terms.total.backward(), &model);
         self.model = Some(self.optimizer.step(lr, model, grads));
         Ok(output)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    use super::*;
+    use crate::sdf::Backend;
+    use crate::sdf::network::SdfNetworkConfig;
+
+    /// Surface samples of an axis-aligned ellipsoid with outward unit normals.
+    fn ellipsoid(axes: [f32; 3], n: usize, rng: &mut ChaCha8Rng) -> Vec<([f32; 3], [f32; 3])> {
+        (0..n)
+            .map(|_| {
+                let u: [f32; 3] = std::array::from_fn(|_| StandardNormal.sample(rng));
+                let l = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+                let p: [f32; 3] = std::array::from_fn(|k| u[k] / l * axes[k]);
+                let m: [f32; 3] = std::array::from_fn(|k| p[k] / (axes[k] * axes[k]));
+                let ml = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+                (p, m.map(|c| c / ml))
+            })
+            .collect()
+    }
+
+    fn batch(shapes: &[[f32; 3]], n: usize, rng: &mut ChaCha8Rng) -> TrainingBatch {
+        let mut b = TrainingBatch::default();
+        for (k, &axes) in shapes.iter().enumerate() {
+            b.shape_indices.push(k);
+            for (i, (p, nrm)) in ellipsoid(axes, n, rng).into_iter().enumerate() {
+                b.surface_points.push(p);
+                b.surface_normals.push(nrm);
+                b.eikonal_points.push(if i % 2 == 0 {
+                    p.map(|c| c + 0.05 * Distribution::<f32>::sample(&StandardNormal, rng))
+                } else {
+                    std::array::from_fn(|_| rng.random_range(-1.0f32..1.0))
+                });
+            }
+        }
+        b
+    }
+
+    #[test]
+    fn loss_falls_over_thirty_steps_on_a_sphere_and_an_ellipsoid() {
+        let device = Backend::Flex.device(true).unwrap();
+        let config = SdfNetworkConfig::new().with_latent_dim(8).with_hidden(64);
+        let model = SdfAutoDecoder::new(&config, 2, 3, &device).unwrap();
+        let before = model.latents_to_vec();
+        let mut trainer = SdfTrainer::new(model, TrainStepConfig::new());
+        let shapes = [[0.6, 0.6, 0.6], [0.8, 0.35, 0.5]];
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let losses: Vec<f32> = (0..30)
+            .map(|_| {
+                trainer
+                    .step(&batch(&shapes, 128, &mut rng), 1e-3)
+                    .unwrap()
+                    .loss
+            })
+            .collect();
+        let first = losses[..3].iter().sum::<f32>() / 3.0;
+        let last = losses[27..].iter().sum::<f32>() / 3.0;
+        assert!(last < 0.5 * first, "loss did not fall: {losses:?}");
+        assert!(losses.iter().all(|l| l.is_finite()));
+        let after = trainer.model().latents_to_vec();
+        assert!(
+            before.iter().zip(&after).all(|(b, a)| b != a),
+            "latents were not optimised"
+        );
+    }
+
+    #[test]
+    fn a_bad_batch_is_an_error_and_keeps_the_model() {
+        let device = Backend::Flex.device(true).unwrap();
+        let config = SdfNetworkConfig::new().with_latent_dim(4).with_hidden(16);
+        let model = SdfAutoDecoder::new(&config, 2, 3, &device).unwrap();
+        let mut trainer = SdfTrainer::new(model, TrainStepConfig::new());
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let mut bad = batch(&[[0.5; 3]], 8, &mut rng);
+        bad.shape_indices = vec![5];
+        assert!(matches!(
+            trainer.step(&bad, 1e-3),
+            Err(BatchError::ShapeIndex { index: 5, .. })
+        ));
+        assert_eq!(trainer.model().num_shapes(), 2);
+        assert!(
+            trainer
+                .step(&batch(&[[0.5; 3], [0.4; 3]], 8, &mut rng), 1e-3)
+                .is_ok()
+        );
     }
 }
