@@ -88,8 +88,9 @@ fn random_rotation(rng: &mut ChaCha8Rng) -> [[f64; 3]; 3] {
     for i in 0..3 {
         for j in 0..i {
             let d: f64 = (0..3).map(|k| cols[i][k] * cols[j][k]).sum();
-            for k in 0..3 {
-                cols[i][k] -= d * cols[j][k];
+            let basis = cols[j];
+            for (c, b) in cols[i].iter_mut().zip(basis) {
+                *c -= d * b;
             }
         }
         let n = cols[i].iter().map(|c| c * c).sum::<f64>().sqrt();
