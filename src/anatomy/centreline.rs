@@ -126,6 +126,9 @@ fn continuation(
     out
 }
 
+/// Largest move of a centre point in one refinement pass, in section radii.
+const MAX_SHIFT: f64 = 0.25;
+
 /// Arc-length positions of `count` stations spaced evenly over (0, length): the stations sit
 /// at the middles of `count` equal intervals, never on an end cap.
 pub fn station_positions(length: f64, spacing: f64) -> Vec<f64> {
@@ -150,8 +153,16 @@ pub fn refine(
         for &s in &stations {
             let (p, t) = line.frame_at(s);
             if let Some(section) = surface.wall_section_at(p, t) {
-                moved = moved.max(norm(sub(section.centroid, p)));
-                centres.push(section.centroid);
+                // A centroid far off the current point means the plane cuts a side branch or
+                // the section is lopsided: hold the point rather than jump.
+                let shift = norm(sub(section.centroid, p));
+                let radius = (section.area / std::f64::consts::PI).sqrt();
+                if shift <= MAX_SHIFT * radius {
+                    moved = moved.max(shift);
+                    centres.push(section.centroid);
+                } else {
+                    centres.push(p);
+                }
             }
         }
         if centres.len() < 2 || centres.len() * 4 < stations.len() * 3 {

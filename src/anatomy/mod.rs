@@ -23,7 +23,7 @@ pub mod tracking;
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::MeshError;
-pub use root::measure_root;
+pub use root::{RootLandmarks, measure_root, measure_root_with_landmarks};
 use surface::Surface;
 
 /// One cross-section of the vessel, normal to the centreline.

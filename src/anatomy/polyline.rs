@@ -29,6 +29,11 @@ impl Polyline {
         &self.points
     }
 
+    /// Arc length at each vertex.
+    pub fn arc_lengths(&self) -> &[f64] {
+        &self.cumulative
+    }
+
     /// Total arc length.
     pub fn length(&self) -> f64 {
         self.cumulative.last().copied().unwrap_or(0.0)
@@ -129,7 +134,7 @@ impl LocalQuadratic {
 
 /// Solves the 3×3 system m·x = rhs for three right-hand sides (Gaussian elimination with
 /// partial pivoting); `None` when m is singular.
-fn solve3(mut m: [[f64; 3]; 3], mut rhs: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
+pub fn solve3(mut m: [[f64; 3]; 3], mut rhs: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     let scale = m.iter().flatten().fold(0.0f64, |a, &b| a.max(b.abs()));
     for col in 0..3 {
         let pivot = (col..3).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;

@@ -106,39 +106,111 @@ fn most_prominent_peak(d: &[f64]) -> Option<(usize, f64)> {
         .max_by(|a, b| a.1.total_cmp(&b.1))
 }
 
-/// Vertex abscissa of the parabola through three equally spaced values, as an offset in
-/// samples from the middle one (clamped to ±1).
-fn parabola_vertex(y0: f64, y1: f64, y2: f64) -> f64 {
-    let curvature = y0 - 2.0 * y1 + y2;
-    if curvature.abs() < 1e-15 {
-        0.0
-    } else {
-        (0.5 * (y0 - y2) / curvature).clamp(-1.0, 1.0)
-    }
-}
-
-/// σ of the sinotubular junction on a dense profile starting at the sinus peak.
+/// σ of the sinotubular junction on a dense profile starting at the sinus peak: a first
+/// estimate where the smoothed slope reaches zero or stops rising, refined by
+/// [`fit_waist`] (smoothing alone would bias it, the two sides curving differently).
 fn find_stj(samples: &[Sample]) -> Option<f64> {
     let sigma = DENSE_SMOOTHING / DENSE_STEP;
-    let d = smooth(&samples.iter().map(|s| s.diameter).collect::<Vec<_>>(), sigma);
-    let slope = derivative(&d, DENSE_STEP);
+    let raw: Vec<f64> = samples.iter().map(|s| s.diameter).collect();
+    let slope = derivative(&smooth(&raw, sigma), DENSE_STEP);
     let n = slope.len();
     // Steepest descent past the sinus.
     let mut q = 0;
     while q + 1 < n && slope[q + 1] <= slope[q] {
         q += 1;
     }
+    let mut rough = None;
     for k in q + 1..n {
-        if slope[k] >= 0.0 {
-            let t = slope[k - 1] / (slope[k - 1] - slope[k]);
-            return Some(samples[k - 1].sigma + t * DENSE_STEP);
-        }
-        if k + 1 < n && slope[k + 1] < slope[k] {
-            let offset = parabola_vertex(slope[k - 1], slope[k], slope[k + 1]);
-            return Some(samples[k].sigma + offset * DENSE_STEP);
+        if slope[k] >= 0.0 || (k + 1 < n && slope[k + 1] < slope[k]) {
+            rough = Some(samples[k].sigma);
+            break;
         }
     }
-    None
+    let rough = rough?;
+    let sigmas: Vec<f64> = samples.iter().map(|s| s.sigma).collect();
+    Some(fit_waist(&sigmas, &raw, rough - WAIST_SEARCH, rough + WAIST_SEARCH).unwrap_or(rough))
+}
+
+/// Half-range of the waist search around the first estimate, mm.
+const WAIST_SEARCH: f64 = 3.0;
+/// Half-width of the samples fitted on each side of a candidate waist, mm.
+const WAIST_HALF_WIDTH: f64 = 4.0;
+
+/// The junction c of the least-squares piecewise polynomial D = D₀ + a·(c − σ)² + a₃·(c − σ)³
+/// before c and D₀ + b·(σ − c)² after it (slope zero at c, curvatures free on each side,
+/// a > 0 for the sinus side, a cubic term for the sinus descent, which is not symmetric),
+/// over candidates c in [lo, hi] every 0.05 mm. This is the shape of a smooth
+/// waist whether the profile rises after it (a minimum) or keeps falling gently (a shoulder).
+fn fit_waist(sigma: &[f64], d: &[f64], lo: f64, hi: f64) -> Option<f64> {
+    let mut best: Option<(f64, f64)> = None;
+    let count = ((hi - lo) / 0.05).round() as usize;
+    for i in 0..=count {
+        let c = lo + i as f64 * 0.05;
+        let rows: Vec<([f64; 4], f64)> = sigma
+            .iter()
+            .zip(d)
+            .filter(|(s, _)| (**s - c).abs() <= WAIST_HALF_WIDTH)
+            .map(|(&s, &y)| {
+                let (before, after) = ((c - s).max(0.0), (s - c).max(0.0));
+                ([1.0, before.powi(2), before.powi(3), after.powi(2)], y)
+            })
+            .collect();
+        if rows.len() < 8 {
+            continue;
+        }
+        let Some(x) = least_squares(&rows) else {
+            continue;
+        };
+        if x[1] <= 0.0 {
+            continue;
+        }
+        let ssr: f64 = rows
+            .iter()
+            .map(|(r, y)| (r.iter().zip(&x).map(|(a, b)| a * b).sum::<f64>() - y).powi(2))
+            .sum::<f64>()
+            / rows.len() as f64;
+        if best.is_none_or(|(_, b)| ssr < b) {
+            best = Some((c, ssr));
+        }
+    }
+    best.map(|(c, _)| c)
+}
+
+/// Least-squares solution of rows · x ≈ y (normal equations, Gaussian elimination with
+/// partial pivoting); `None` when the columns are dependent.
+fn least_squares<const N: usize>(rows: &[([f64; N], f64)]) -> Option<[f64; N]> {
+    let mut m = [[0.0; N]; N];
+    let mut rhs = [0.0; N];
+    for (r, y) in rows {
+        for i in 0..N {
+            for j in 0..N {
+                m[i][j] += r[i] * r[j];
+            }
+            rhs[i] += r[i] * y;
+        }
+    }
+    let scale = m.iter().flatten().fold(0.0f64, |a, &b| a.max(b.abs()));
+    for col in 0..N {
+        let pivot = (col..N).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
+        if m[pivot][col].abs() <= 1e-12 * scale {
+            return None;
+        }
+        m.swap(col, pivot);
+        rhs.swap(col, pivot);
+        for r in col + 1..N {
+            let f = m[r][col] / m[col][col];
+            for c in col..N {
+                m[r][c] -= f * m[col][c];
+            }
+            rhs[r] -= f * rhs[col];
+        }
+    }
+    let mut x = [0.0; N];
+    for r in (0..N).rev() {
+        let tail: f64 = (r + 1..N).map(|c| m[r][c] * x[c]).sum();
+        x[r] = (rhs[r] - tail) / m[r][r];
+    }
+    Some(x)
 }
 
 /// σ of the annulus plane on a dense profile from the inlet to the sinus peak.
@@ -220,9 +292,28 @@ fn sinus_diameter(surface: &Surface, a: [f64; 3], b: [f64; 3]) -> Option<f64> {
     Some(2.0 * best)
 }
 
+/// Where the landmarks of a root lie along its centreline (arc lengths from the
+/// centreline's start, as in [`super::Station::s_mm`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RootLandmarks {
+    /// True when the centreline starts at the annulus end (the inlet).
+    pub inlet_at_start: bool,
+    /// Annulus plane.
+    pub annulus_s_mm: f64,
+    /// Sinotubular junction.
+    pub stj_s_mm: f64,
+}
+
 /// Annulus, sinus, STJ and ascending diameters and the sinus height of an aortic-root
 /// surface in millimetres, from its centreline profile (see the module docs).
 pub fn measure_root(mesh: &TriMesh) -> Result<RootMeasurements, MeasureError> {
+    measure_root_with_landmarks(mesh).map(|(m, _)| m)
+}
+
+/// [`measure_root`] together with where the landmarks were found.
+pub fn measure_root_with_landmarks(
+    mesh: &TriMesh,
+) -> Result<(RootMeasurements, RootLandmarks), MeasureError> {
     let surface = Surface::new(mesh)?;
     let opts = MeasureOptions::default();
     let (line, vessel) = measure_prepared(&surface, &opts)?;
@@ -289,7 +380,8 @@ pub fn measure_root(mesh: &TriMesh) -> Result<RootMeasurements, MeasureError> {
         ));
     }
     ascending.sort_by(f64::total_cmp);
-    Ok(RootMeasurements {
+    let to_s = |sigma: f64| if forward { sigma } else { length - sigma };
+    let measurements = RootMeasurements {
         annulus_major_mm: major,
         annulus_minor_mm: minor,
         annulus_mean_mm: 0.5 * (major + minor),
@@ -297,5 +389,11 @@ pub fn measure_root(mesh: &TriMesh) -> Result<RootMeasurements, MeasureError> {
         stj_diameter_mm: stj.diameter,
         sinus_height_mm: sigma_stj - sigma_annulus,
         ascending_diameter_mm: ascending[ascending.len() / 2],
-    })
+    };
+    let landmarks = RootLandmarks {
+        inlet_at_start: forward,
+        annulus_s_mm: to_s(sigma_annulus),
+        stj_s_mm: to_s(sigma_stj),
+    };
+    Ok((measurements, landmarks))
 }

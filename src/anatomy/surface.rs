@@ -199,11 +199,14 @@ impl Surface {
     }
 
     /// [`Surface::section_at`], rejecting loops that run over a surface facing along the
-    /// centreline (|cos| above [`FACING_LIMIT`]): such a loop is not a cross-section of the
-    /// vessel but cuts an end cap or the rim of a side branch.
+    /// centreline (|cos| above [`FACING_LIMIT`]: the loop cuts an end cap or the rim of a side
+    /// branch) and loops whose centroid lies farther from `centre` than their equivalent
+    /// radius (the plane runs along the vessel rather than across it).
     pub fn wall_section_at(&self, centre: [f64; 3], normal: [f64; 3]) -> Option<SectionLoop> {
-        self.section_at(centre, normal)
-            .filter(|s| s.facing <= FACING_LIMIT)
+        self.section_at(centre, normal).filter(|s| {
+            let radius = (s.area / std::f64::consts::PI).sqrt();
+            s.facing <= FACING_LIMIT && norm(sub(s.centroid, centre)) <= radius
+        })
     }
 
     /// Distance within `max` along the unit direction `dir` from `from` at which a path

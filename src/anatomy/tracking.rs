@@ -9,12 +9,13 @@ use super::polyline::Polyline;
 use super::surface::Surface;
 use crate::geometry::mesh::{dot, norm, normalized, sub};
 
-/// Start candidates along the rough centre line, as fractions of its length: the middle
-/// first, then alternately further out (a start on a branch ostium is skipped).
-const START_FRACTIONS: [f64; 7] = [0.5, 0.4, 0.6, 0.3, 0.7, 0.2, 0.8];
+/// Share of the rough centre line kept at each end's side: its middle part is trusted (level
+/// sets there are clean rings, also through an arch), the ends are tracked again.
+const TRUSTED: (f64, f64) = (0.15, 0.85);
 
-/// Section centroids from one end of the vessel to the other, and the two end points, found
-/// by tracking both ways from a point of `rough` (a polyline roughly inside the lumen).
+/// Section centroids from one end of the vessel to the other, the first and last points being
+/// where the path leaves the vessel: the trusted middle of `rough` (a polyline of level-set
+/// centroids), continued at both ends by tracking the lumen to the vessel's ends.
 pub fn track(
     surface: &Surface,
     rough: &Polyline,
@@ -22,24 +23,31 @@ pub fn track(
     window: f64,
 ) -> Result<Polyline, MeasureError> {
     let length = rough.length();
-    for fraction in START_FRACTIONS {
-        let s = fraction * length;
-        let (p, t) = rough.frame_at(s, window);
-        let Some(section) = surface.wall_section_at(p, t) else {
-            continue;
-        };
-        let c = section.centroid;
-        let budget = (4.0 * length / step) as usize + 10;
-        let forward = walk(surface, c, t, step, window, budget);
-        let backward = walk(surface, c, t.map(|x| -x), step, window, budget);
-        let mut points: Vec<[f64; 3]> = backward.into_iter().rev().collect();
-        points.push(c);
-        points.extend(forward);
-        return Ok(Polyline::new(points));
-    }
-    Err(MeasureError::NotTubular(
-        "no plane normal to the rough centreline cuts a closed wall section".into(),
-    ))
+    let (lo, hi) = (TRUSTED.0 * length, TRUSTED.1 * length);
+    let (p0, t0) = rough.frame_at(lo, window);
+    let (p1, t1) = rough.frame_at(hi, window);
+    let start = surface.wall_section_at(p0, t0);
+    let end = surface.wall_section_at(p1, t1);
+    let (Some(start), Some(end)) = (start, end) else {
+        return Err(MeasureError::NotTubular(
+            "no plane normal to the rough centreline cuts a closed wall section".into(),
+        ));
+    };
+    let budget = (4.0 * length / step) as usize + 10;
+    let before = walk(surface, start.centroid, t0.map(|x| -x), step, window, budget);
+    let after = walk(surface, end.centroid, t1, step, window, budget);
+    let mut points: Vec<[f64; 3]> = before.into_iter().rev().collect();
+    points.push(start.centroid);
+    let middle = rough
+        .points()
+        .iter()
+        .zip(rough.arc_lengths())
+        .filter(|&(_, &s)| s > lo + step && s < hi - step)
+        .map(|(p, _)| *p);
+    points.extend(middle);
+    points.push(end.centroid);
+    points.extend(after);
+    Ok(Polyline::new(points))
 }
 
 /// Centroids (ending with the exit point) walking from `start` along `dir`.
@@ -51,7 +59,7 @@ fn walk(
     window: f64,
     budget: usize,
 ) -> Vec<[f64; 3]> {
-    let lag = ((window / step).ceil() as usize).max(1);
+    let lag = ((0.5 * window / step).ceil() as usize).max(1);
     let mut path = vec![start];
     let mut t = dir;
     for _ in 0..budget {
@@ -60,8 +68,17 @@ fn walk(
             path.push(std::array::from_fn(|i| c[i] + d * t[i]));
             break;
         }
-        let p: [f64; 3] = std::array::from_fn(|i| c[i] + step * t[i]);
-        let Some(section) = surface.wall_section_at(p, t) else {
+        // A plane through a side-branch ostium gives no wall section: look further ahead
+        // (up to `window`) before concluding that the vessel ends here.
+        let ahead = (1..=lag.max(2)).find_map(|k| {
+            let d = k as f64 * step;
+            if k > 1 && surface.first_exit(c, t, d).is_some() {
+                return Some(None);
+            }
+            let p: [f64; 3] = std::array::from_fn(|i| c[i] + d * t[i]);
+            surface.wall_section_at(p, t).map(Some)
+        });
+        let Some(Some(section)) = ahead else {
             // The plane reaches an end cap: finish along the tangent.
             let d = surface.first_exit(c, t, f64::INFINITY).unwrap_or(0.0);
             path.push(std::array::from_fn(|i| c[i] + d * t[i]));
