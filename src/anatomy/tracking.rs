@@ -9,9 +9,10 @@ use super::polyline::Polyline;
 use super::surface::Surface;
 use crate::geometry::mesh::{dot, norm, normalized, sub};
 
-/// Share of the rough centre line kept at each end's side: its middle part is trusted (level
-/// sets there are clean rings, also through an arch), the ends are tracked again.
-const TRUSTED: (f64, f64) = (0.15, 0.85);
+/// Where the trusted middle of the rough centre line may start, as fractions of its length
+/// from either end (the first candidate that is not on a side-branch ostium is used): level
+/// sets there are clean rings, also through an arch; the ends are tracked again.
+const TRUSTED: [f64; 5] = [0.15, 0.2, 0.1, 0.25, 0.3];
 
 /// Section centroids from one end of the vessel to the other, the first and last points being
 /// where the path leaves the vessel: the trusted middle of `rough` (a polyline of level-set
@@ -23,12 +24,16 @@ pub fn track(
     window: f64,
 ) -> Result<Polyline, MeasureError> {
     let length = rough.length();
-    let (lo, hi) = (TRUSTED.0 * length, TRUSTED.1 * length);
-    let (p0, t0) = rough.frame_at(lo, window);
-    let (p1, t1) = rough.frame_at(hi, window);
-    let start = surface.wall_section_at(p0, t0);
-    let end = surface.wall_section_at(p1, t1);
-    let (Some(start), Some(end)) = (start, end) else {
+    // The first arc length (of the candidates) whose normal plane gives a wall section.
+    let anchor = |fractions: &[f64]| {
+        fractions.iter().find_map(|&f| {
+            let (p, t) = rough.frame_at(f * length, window);
+            surface.wall_section_at(p, t).map(|s| (f * length, s, t))
+        })
+    };
+    let first = anchor(&TRUSTED.map(|f| f));
+    let last = anchor(&TRUSTED.map(|f| 1.0 - f));
+    let (Some((lo, start, t0)), Some((hi, end, t1))) = (first, last) else {
         return Err(MeasureError::NotTubular(
             "no plane normal to the rough centreline cuts a closed wall section".into(),
         ));
