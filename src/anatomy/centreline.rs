@@ -8,8 +8,7 @@ use super::{MeasureError, MeasureOptions};
 use crate::geometry::mesh::{norm, normalized, sub};
 
 /// Centre points (`inner`, smoothed by local quadratic fits) continued at both ends along
-/// the end fits (`head`, `tail`) to where the vessel ends, so that a bent vessel keeps its
-/// bend up to its ends. Only `inner` is data: the continuation never feeds back into the
+/// the fitted end tangents (`head`, `tail`) to where the vessel ends. Only `inner` is data: the continuation never feeds back into the
 /// fits, which keeps the ends stable from one refinement to the next.
 #[derive(Debug, Clone)]
 pub struct Centreline {
@@ -24,8 +23,17 @@ pub struct Centreline {
 impl Centreline {
     /// Continues `inner` at both ends in steps of `step` for at most `reach` each.
     pub fn new(surface: &Surface, inner: Polyline, smoothing: f64, step: f64, reach: f64) -> Self {
-        let head = inner.local_fit(0.0, smoothing);
-        let tail = inner.local_fit(inner.length(), smoothing);
+        // Straight continuations along the fitted end tangents: extrapolating the curvature
+        // of a one-sided fit would amplify any wobble of the last centre points.
+        let straight = |s: f64, at: [f64; 3]| {
+            inner.local_fit(s, smoothing).map(|mut fit| {
+                fit.coeffs[0] = at;
+                fit.coeffs[2] = [0.0; 3];
+                fit
+            })
+        };
+        let head = straight(0.0, inner.points()[0]);
+        let tail = straight(inner.length(), inner.points()[inner.points().len() - 1]);
         let mut before = continuation(surface, &inner, head, 0.0, -1.0, step, reach);
         before.reverse();
         let after = continuation(surface, &inner, tail, inner.length(), 1.0, step, reach);
@@ -67,9 +75,22 @@ impl Centreline {
         )
     }
 
-    /// Length from where the centreline enters to where it leaves the vessel.
+    /// Arc length of the polyline through the centre points and continuations, which
+    /// parametrises [`Centreline::frame_at`].
     pub fn length(&self) -> f64 {
         self.full.length()
+    }
+
+    /// Length of the smoothed centreline from where it enters to where it leaves the vessel:
+    /// the smoothed curve sampled every `step` (the raw centre points carry millimetre-scale
+    /// noise, which would lengthen the polyline through them).
+    pub fn smoothed_length(&self, step: f64) -> f64 {
+        let total = self.length();
+        let n = ((total / step).ceil() as usize).max(1);
+        let mut points: Vec<[f64; 3]> = vec![self.full.points()[0]];
+        points.extend((1..n).map(|k| self.frame_at(total * k as f64 / n as f64).0));
+        points.push(self.full.points()[self.full.points().len() - 1]);
+        points.windows(2).map(|w| norm(sub(w[1], w[0]))).sum()
     }
 
     /// The whole centreline as a polyline.
@@ -154,14 +175,12 @@ pub fn refine(
             let (p, t) = line.frame_at(s);
             if let Some(section) = surface.wall_section_at(p, t) {
                 // A centroid far off the current point means the plane cuts a side branch or
-                // the section is lopsided: hold the point rather than jump.
+                // the section is lopsided: leave the station out rather than jump.
                 let shift = norm(sub(section.centroid, p));
                 let radius = (section.area / std::f64::consts::PI).sqrt();
                 if shift <= MAX_SHIFT * radius {
                     moved = moved.max(shift);
                     centres.push(section.centroid);
-                } else {
-                    centres.push(p);
                 }
             }
         }

@@ -194,7 +194,7 @@ pub(crate) fn measure_prepared(
         )));
     }
     let measurements = VesselMeasurements {
-        centreline_length_mm: line.length(),
+        centreline_length_mm: line.smoothed_length(0.25 * opts.station_spacing_mm),
         stations,
     };
     Ok((line, measurements))

@@ -12,8 +12,9 @@ use crate::geometry::TriMesh;
 use crate::geometry::mesh::{cross, dot, norm, sub};
 
 /// Largest |cos| between a cutting plane's normal and a crossed triangle's normal for the
-/// loop to count as a wall section (the wall may slope up to about 70° from the axis).
-pub const FACING_LIMIT: f64 = 0.95;
+/// loop to count as a wall section: the wall may slope up to about 70° from the axis, and a
+/// plane tilted less than 18° against an end cap is caught.
+pub const FACING_LIMIT: f64 = 0.85;
 
 /// An open end of the surface (a boundary loop), summarised for end-point search.
 #[derive(Debug, Clone, Copy, PartialEq)]

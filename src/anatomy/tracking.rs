@@ -64,7 +64,7 @@ fn walk(
     window: f64,
     budget: usize,
 ) -> Vec<[f64; 3]> {
-    let lag = ((0.5 * window / step).ceil() as usize).max(1);
+    let lag = ((window / step).ceil() as usize).max(1);
     let mut path = vec![start];
     let mut t = dir;
     for _ in 0..budget {
