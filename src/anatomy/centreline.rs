@@ -111,7 +111,9 @@ impl Centreline {
         };
         match end_fit {
             Some((fit, ds)) if norm(fit.tangent(ds)) > 0.0 => (fit.at(ds), fit.tangent(ds)),
-            _ => self.inner.frame_at(u.clamp(0.0, inner_length), self.smoothing),
+            _ => self
+                .inner
+                .frame_at(u.clamp(0.0, inner_length), self.smoothing),
         }
     }
 }

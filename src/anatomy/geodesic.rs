@@ -95,7 +95,11 @@ fn seed_vertex(surface: &Surface) -> usize {
     let mut size = vec![0usize; n];
     let used: Vec<bool> = {
         let mut u = vec![false; n];
-        surface.triangles.iter().flatten().for_each(|&v| u[v as usize] = true);
+        surface
+            .triangles
+            .iter()
+            .flatten()
+            .for_each(|&v| u[v as usize] = true);
         u
     };
     for v in (0..n).filter(|&v| used[v]) {
@@ -117,7 +121,7 @@ pub fn level_set_centres(surface: &Surface, step: f64) -> Result<Polyline, Measu
     let dist = graph.distances(a);
     let b = farthest(&dist);
     let span = dist[b];
-    if !(span > 0.0) {
+    if span.is_nan() || span <= 0.0 {
         return Err(MeasureError::NotTubular(
             "the surface has no extent between its farthest vertices".into(),
         ));
@@ -142,7 +146,10 @@ pub fn level_set_centres(surface: &Surface, step: f64) -> Result<Polyline, Measu
             lo <= level && level <= hi
         });
         let rings = contours(within, &surface.positions, |v| dist[v as usize] - level);
-        if let Some(ring) = rings.iter().max_by(|x, y| x.length().total_cmp(&y.length())) {
+        if let Some(ring) = rings
+            .iter()
+            .max_by(|x, y| x.length().total_cmp(&y.length()))
+        {
             let diameter = ring.length() / std::f64::consts::PI;
             if ring.closed && level >= diameter && span - level >= diameter {
                 points.push(ring.centroid());

@@ -55,12 +55,15 @@ impl Polyline {
     /// (widened to hold at least four vertices), in the offset u = (arc length − s) / window.
     /// A quadratic reproduces straight lines exactly and circular arcs to third order, so the
     /// smoothing does not shorten bends noticeably.
+    #[allow(clippy::needless_range_loop)] // index loops mirror the normal equations
     pub fn local_fit(&self, s: f64, half_window: f64) -> Option<LocalQuadratic> {
         let n = self.points.len();
         let mut w = half_window.max(1e-9);
         let mut idx: Vec<usize>;
         loop {
-            idx = (0..n).filter(|&i| (self.cumulative[i] - s).abs() <= w).collect();
+            idx = (0..n)
+                .filter(|&i| (self.cumulative[i] - s).abs() <= w)
+                .collect();
             if idx.len() >= 4.min(n) {
                 break;
             }
@@ -99,9 +102,16 @@ impl Polyline {
 
     /// Linearly interpolated point at arc length `s` (clamped to the ends).
     pub fn point_at(&self, s: f64) -> [f64; 3] {
-        let i = self.cumulative.partition_point(|&c| c < s).clamp(1, self.points.len() - 1);
+        let i = self
+            .cumulative
+            .partition_point(|&c| c < s)
+            .clamp(1, self.points.len() - 1);
         let (s0, s1) = (self.cumulative[i - 1], self.cumulative[i]);
-        let t = if s1 > s0 { ((s - s0) / (s1 - s0)).clamp(0.0, 1.0) } else { 0.0 };
+        let t = if s1 > s0 {
+            ((s - s0) / (s1 - s0)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let (a, b) = (self.points[i - 1], self.points[i]);
         std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
     }
@@ -134,6 +144,7 @@ impl LocalQuadratic {
 
 /// Solves the 3×3 system m·x = rhs for three right-hand sides (Gaussian elimination with
 /// partial pivoting); `None` when m is singular.
+#[allow(clippy::needless_range_loop)] // index loops mirror the elimination formulas
 pub fn solve3(mut m: [[f64; 3]; 3], mut rhs: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     let scale = m.iter().flatten().fold(0.0f64, |a, &b| a.max(b.abs()));
     for col in 0..3 {
@@ -162,4 +173,3 @@ pub fn solve3(mut m: [[f64; 3]; 3], mut rhs: [[f64; 3]; 3]) -> Option<[[f64; 3];
     }
     Some(x)
 }
-

@@ -45,7 +45,11 @@ impl RootLine<'_> {
     }
 
     fn sample(&self, sigma: f64) -> Option<Sample> {
-        let s = if self.forward { sigma } else { self.length() - sigma };
+        let s = if self.forward {
+            sigma
+        } else {
+            self.length() - sigma
+        };
         let (p, t) = self.line.frame_at(s);
         let section = self.surface.wall_section_at(p, t)?;
         let diameter = (4.0 * section.area / std::f64::consts::PI).sqrt();
@@ -89,7 +93,11 @@ fn derivative(values: &[f64], step: f64) -> Vec<f64> {
     (0..n)
         .map(|i| {
             let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-            if a == b { 0.0 } else { (values[b] - values[a]) / ((b - a) as f64 * step) }
+            if a == b {
+                0.0
+            } else {
+                (values[b] - values[a]) / ((b - a) as f64 * step)
+            }
         })
         .collect()
 }
@@ -178,6 +186,7 @@ fn fit_waist(sigma: &[f64], d: &[f64], lo: f64, hi: f64) -> Option<f64> {
 
 /// Least-squares solution of rows · x ≈ y (normal equations, Gaussian elimination with
 /// partial pivoting); `None` when the columns are dependent.
+#[allow(clippy::needless_range_loop)] // index loops mirror the elimination formulas
 fn least_squares<const N: usize>(rows: &[([f64; N], f64)]) -> Option<[f64; N]> {
     let mut m = [[0.0; N]; N];
     let mut rhs = [0.0; N];
@@ -246,7 +255,7 @@ fn find_annulus(samples: &[Sample], peak_diameter: f64) -> f64 {
         (a + (p.0 - mx) * (p.1 - my), b + (p.0 - mx).powi(2))
     });
     let slope_fit = sxy / sxx;
-    if !(slope_fit > 0.0) {
+    if slope_fit.is_nan() || slope_fit <= 0.0 {
         return samples[plateau_end].sigma;
     }
     (mx - my / slope_fit).clamp(first, samples[steepest].sigma)
@@ -342,7 +351,11 @@ pub fn measure_root_with_landmarks(
         line: &line,
         forward,
     };
-    let sigma_peak = if forward { stations[peak].s_mm } else { length - stations[peak].s_mm };
+    let sigma_peak = if forward {
+        stations[peak].s_mm
+    } else {
+        length - stations[peak].s_mm
+    };
 
     let after = root.dense(sigma_peak, sigma_peak + 30.0);
     let sigma_stj = find_stj(&after)
@@ -359,8 +372,12 @@ pub fn measure_root_with_landmarks(
     let missing = |what: &str, at: f64| {
         MeasureError::NotTubular(format!("no closed {what} section at {at:.2} mm"))
     };
-    let annulus = root.sample(sigma_annulus).ok_or_else(|| missing("annulus", sigma_annulus))?;
-    let stj = root.sample(sigma_stj).ok_or_else(|| missing("STJ", sigma_stj))?;
+    let annulus = root
+        .sample(sigma_annulus)
+        .ok_or_else(|| missing("annulus", sigma_annulus))?;
+    let stj = root
+        .sample(sigma_stj)
+        .ok_or_else(|| missing("STJ", sigma_stj))?;
     let (major, minor) = annulus.section.feret();
     let sinus = sinus_diameter(&surface, annulus.section.centroid, stj.section.centroid)
         .ok_or_else(|| missing("sinus", 0.5 * (sigma_annulus + sigma_stj)))?;

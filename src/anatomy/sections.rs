@@ -138,7 +138,11 @@ fn chain(
             let Some(s) = next(e, cur, &used) else { break };
             used[s] = true;
             members.push(s);
-            e = if segments[s][0] == e { segments[s][1] } else { segments[s][0] };
+            e = if segments[s][0] == e {
+                segments[s][1]
+            } else {
+                segments[s][0]
+            };
             keys.push_back(e);
             cur = s;
         }
@@ -147,7 +151,11 @@ fn chain(
             while let Some(s) = next(e, cur, &used) {
                 used[s] = true;
                 members.push(s);
-                e = if segments[s][0] == e { segments[s][1] } else { segments[s][0] };
+                e = if segments[s][0] == e {
+                    segments[s][1]
+                } else {
+                    segments[s][0]
+                };
                 keys.push_front(e);
                 cur = s;
             }
@@ -260,7 +268,8 @@ pub fn convex_hull(points: &[[f64; 2]]) -> Vec<[f64; 2]> {
             Box::new(p.iter().rev())
         };
         for &q in iter {
-            while hull.len() >= start + 2 && cross2(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            while hull.len() >= start + 2
+                && cross2(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
             {
                 hull.pop();
             }

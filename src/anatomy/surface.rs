@@ -137,7 +137,10 @@ impl Surface {
             let gap = if inside {
                 area
             } else {
-                let nearest = points.iter().map(|p| p[0].hypot(p[1])).fold(f64::INFINITY, f64::min);
+                let nearest = points
+                    .iter()
+                    .map(|p| p[0].hypot(p[1]))
+                    .fold(f64::INFINITY, f64::min);
                 if nearest > (area / std::f64::consts::PI).sqrt() {
                     continue;
                 }
@@ -145,7 +148,9 @@ impl Surface {
             };
             let better = match &best {
                 None => true,
-                Some((b_inside, b_gap, _)) => (inside && !b_inside) || (inside == *b_inside && gap < *b_gap),
+                Some((b_inside, b_gap, _)) => {
+                    (inside && !b_inside) || (inside == *b_inside && gap < *b_gap)
+                }
             };
             if better {
                 let centroid = frame.lift(c2);
@@ -254,7 +259,10 @@ fn boundary_loops(triangles: &[[u32; 3]], positions: &[[f64; 3]]) -> Vec<OpenEnd
         }
         let mut chain = vec![start];
         let (mut prev, mut cur) = (u32::MAX, start);
-        while let Some(&n) = next[&cur].iter().find(|&&n| n != prev && !seen.contains(&n)) {
+        while let Some(&n) = next[&cur]
+            .iter()
+            .find(|&&n| n != prev && !seen.contains(&n))
+        {
             seen.insert(n);
             chain.push(n);
             (prev, cur) = (cur, n);
@@ -268,11 +276,18 @@ fn boundary_loops(triangles: &[[u32; 3]], positions: &[[f64; 3]]) -> Vec<OpenEnd
             faces: Vec::new(),
         };
         let centroid = contour.centroid();
-        let radius = contour.points.iter().map(|&p| norm(sub(p, centroid))).sum::<f64>()
+        let radius = contour
+            .points
+            .iter()
+            .map(|&p| norm(sub(p, centroid)))
+            .sum::<f64>()
             / contour.points.len() as f64;
         let n = contour.points.len();
         let newell = (0..n).fold([0.0; 3], |acc, i| {
-            let c = cross(sub(contour.points[i], centroid), sub(contour.points[(i + 1) % n], centroid));
+            let c = cross(
+                sub(contour.points[i], centroid),
+                sub(contour.points[(i + 1) % n], centroid),
+            );
             std::array::from_fn(|k| acc[k] + c[k])
         });
         ends.push(OpenEnd {

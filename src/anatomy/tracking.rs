@@ -39,7 +39,14 @@ pub fn track(
         ));
     };
     let budget = (4.0 * length / step) as usize + 10;
-    let before = walk(surface, start.centroid, t0.map(|x| -x), step, window, budget);
+    let before = walk(
+        surface,
+        start.centroid,
+        t0.map(|x| -x),
+        step,
+        window,
+        budget,
+    );
     let after = walk(surface, end.centroid, t1, step, window, budget);
     let mut points: Vec<[f64; 3]> = before.into_iter().rev().collect();
     points.push(start.centroid);

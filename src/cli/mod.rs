@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod measure;
 pub mod render;
 pub mod synth;
 
@@ -21,6 +22,8 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Render meshes side by side into a PNG.
     Render(render::RenderArgs),
+    /// Measure a vessel surface: centreline length, diameter profile, root landmarks.
+    Measure(measure::MeasureArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -29,5 +32,6 @@ pub fn run() -> anyhow::Result<()> {
     match cli.command {
         Command::Synth(args) => synth::run(args),
         Command::Render(args) => render::run(args),
+        Command::Measure(args) => measure::run(args),
     }
 }
