@@ -4,6 +4,7 @@
 //! The modules follow the architecture: pure geometry at the bottom, the learned model
 //! above it, and the command line (and later the HTTP service) on top.
 
+pub mod anatomy;
 pub mod cli;
 pub mod config;
 pub mod db;

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 pub mod evaluate;
 pub mod generate;
+pub mod measure;
 pub mod mesh;
 pub mod progress;
 pub mod render;
@@ -37,6 +38,8 @@ pub enum Command {
     Mesh(mesh::MeshArgs),
     /// Run the cohort service: REST API and job workers on a SQLite database.
     Serve(serve::ServeArgs),
+    /// Measure a vessel surface: centreline length, diameter profile, root landmarks.
+    Measure(measure::MeasureArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -50,5 +53,6 @@ pub fn run() -> anyhow::Result<()> {
         Command::Generate(args) => generate::run(args),
         Command::Mesh(args) => mesh::run(args),
         Command::Serve(args) => serve::run(args),
+        Command::Measure(args) => measure::run(args),
     }
 }

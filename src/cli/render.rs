@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 
 use crate::geometry::TriMesh;
 use crate::render::{View, encode_png, render_meshes};
@@ -35,19 +35,7 @@ pub struct RenderArgs {
 
 /// Reads a mesh file. Binary PLY is read natively; other formats need the general readers.
 pub fn read_mesh(path: &Path) -> anyhow::Result<TriMesh> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or_default()
-        .to_ascii_lowercase();
-    if ext != "ply" {
-        bail!(
-            "{}: only .ply meshes can be read by this build",
-            path.display()
-        );
-    }
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    crate::synth::ply::read_ply(&bytes).with_context(|| format!("parsing {}", path.display()))
+    Ok(crate::formats::read_mesh_file(path)?)
 }
 
 /// Runs the command.

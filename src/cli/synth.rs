@@ -91,22 +91,12 @@ struct Manifest {
 
 const FRAME: &str = "annulus centre at the origin, outflow axis +z, annulus major axis +x";
 
-/// Fails unless this build can write `format`. PLY is written natively; the other formats
-/// need the general mesh writers.
-pub fn check_format(format: SynthFormat) -> anyhow::Result<()> {
-    match format {
-        SynthFormat::Ply => Ok(()),
-        other => bail!(
-            "format `{}` is not available in this build; use --format ply",
-            other.extension()
-        ),
-    }
-}
-
-/// Writes `mesh` to `path` in `format`.
+/// Writes `mesh` to `path` in `format`, in millimetres.
 pub fn write_mesh(path: &Path, mesh: &TriMesh, format: SynthFormat) -> anyhow::Result<()> {
-    check_format(format)?;
-    let bytes = crate::synth::ply::write_ply(mesh, "aortagen parametric aortic root, units mm");
+    let format: crate::formats::MeshFormat = format.extension().parse()?;
+    let mut meta = crate::formats::MeshMetadata::new("mm");
+    meta.extras = serde_json::json!({ "source": "aortagen parametric aortic root" });
+    let bytes = crate::formats::write_mesh(mesh, format, &meta)?;
     std::fs::write(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
@@ -115,7 +105,6 @@ pub fn run(args: SynthArgs) -> anyhow::Result<()> {
     if args.count == 0 {
         bail!("--count must be at least 1");
     }
-    check_format(args.format)?; // fail before any work
     let closed = !args.open;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating output directory {}", args.out.display()))?;

@@ -1,0 +1,211 @@
+//! Anatomical measurements of vessel surfaces in millimetres: a centreline with its length
+//! and diameter profile for any tubular surface, and the clinical landmarks of an aortic root
+//! (annulus, sinus of Valsalva, sinotubular junction, sinus height, ascending aorta).
+//!
+//! Method (docs/MEASUREMENTS.md has the details and the validation):
+//! 1. first guess: the ends are the geodesically farthest vertex pair, the centre points the
+//!    centroids of the level sets of the geodesic distance from one end ([`geodesic`]);
+//! 2. refinement: at evenly spaced stations the surface is cut by the plane normal to the
+//!    smoothed centreline, the closed loop surrounding the centre point is kept (other loops
+//!    — the other limb of an arch, a side branch — are ignored) and its area centroid becomes
+//!    the new centre point; repeated until the centres stop moving ([`centreline`]);
+//! 3. the converged centreline is cut once more at the reported stations ([`measure_vessel`]);
+//! 4. for roots, landmarks are found on the diameter profile alone ([`root`]).
+
+pub mod centreline;
+pub mod geodesic;
+pub mod polyline;
+pub mod root;
+pub mod sections;
+pub mod surface;
+pub mod tracking;
+
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::MeshError;
+pub use root::{RootLandmarks, measure_root, measure_root_with_landmarks};
+use surface::Surface;
+
+/// One cross-section of the vessel, normal to the centreline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Station {
+    /// Arc length along the centreline from its start.
+    pub s_mm: f64,
+    /// Centreline point (the cutting plane passes through it).
+    pub centre: [f64; 3],
+    /// Unit centreline tangent (the cutting plane's normal), pointing towards larger `s_mm`.
+    pub tangent: [f64; 3],
+    /// Area enclosed by the section loop.
+    pub area_mm2: f64,
+    /// Area-equivalent diameter √(4A/π).
+    pub equivalent_diameter_mm: f64,
+    /// Largest distance between two points of the loop (maximal Feret diameter).
+    pub max_diameter_mm: f64,
+    /// Smallest width of the loop between parallel tangent lines (minimal Feret diameter).
+    pub min_diameter_mm: f64,
+}
+
+/// Centreline length and diameter profile of a tubular surface.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VesselMeasurements {
+    /// Length of the centreline from where it enters to where it leaves the vessel.
+    pub centreline_length_mm: f64,
+    /// Sections at evenly spaced arc lengths, in order.
+    pub stations: Vec<Station>,
+}
+
+/// Landmark diameters and heights of an aortic root.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RootMeasurements {
+    /// Maximal Feret diameter of the annulus section.
+    pub annulus_major_mm: f64,
+    /// Minimal Feret diameter of the annulus section.
+    pub annulus_minor_mm: f64,
+    /// Mean of the annulus major and minor diameters.
+    pub annulus_mean_mm: f64,
+    /// Twice the largest distance from the root axis to the wall between annulus and STJ.
+    pub sinus_diameter_mm: f64,
+    /// Area-equivalent diameter at the sinotubular junction.
+    pub stj_diameter_mm: f64,
+    /// Centreline distance from the annulus plane to the sinotubular junction.
+    pub sinus_height_mm: f64,
+    /// Median area-equivalent diameter of the distal half of the segment above the STJ.
+    pub ascending_diameter_mm: f64,
+}
+
+/// Tuning of the centreline computation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeasureOptions {
+    /// Target distance between stations (the actual spacing divides the length evenly).
+    pub station_spacing_mm: f64,
+    /// Half-width of the window of the local quadratic fit that smooths the centreline.
+    pub smoothing_mm: f64,
+    /// Most slicing/re-centring passes (stops earlier once converged).
+    pub iterations: usize,
+}
+
+impl Default for MeasureOptions {
+    /// 1 mm stations, 5 mm smoothing (a fifth of an aortic diameter), up to 4 passes.
+    fn default() -> Self {
+        Self {
+            station_spacing_mm: 1.0,
+            smoothing_mm: 10.0,
+            iterations: 4,
+        }
+    }
+}
+
+impl MeasureOptions {
+    fn validate(&self) -> Result<(), MeasureError> {
+        let bad = |what: String| Err(MeasureError::BadOptions(what));
+        if !(self.station_spacing_mm.is_finite() && self.station_spacing_mm > 0.0) {
+            return bad(format!(
+                "station_spacing_mm = {} must be a positive number",
+                self.station_spacing_mm
+            ));
+        }
+        if !(self.smoothing_mm.is_finite() && self.smoothing_mm > 0.0) {
+            return bad(format!(
+                "smoothing_mm = {} must be a positive number",
+                self.smoothing_mm
+            ));
+        }
+        if !(1..=20).contains(&self.iterations) {
+            return bad(format!("iterations = {} must be 1–20", self.iterations));
+        }
+        Ok(())
+    }
+}
+
+/// Why a surface could not be measured.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeasureError {
+    /// The mesh itself is unusable (empty, non-finite, bad indices).
+    #[error("invalid mesh: {0}")]
+    InvalidMesh(#[from] MeshError),
+    /// The options are out of range.
+    #[error("invalid measurement options: {0}")]
+    BadOptions(String),
+    /// The surface is not a tube: no consistent closed sections along a centreline.
+    #[error("not a tubular vessel: {0}")]
+    NotTubular(String),
+    /// The diameter profile lacks a landmark of an aortic root.
+    #[error("not an aortic root: {0}")]
+    NotARoot(String),
+}
+
+/// The converged centreline of a prepared surface.
+pub(crate) fn vessel_centreline(
+    surface: &Surface,
+    opts: &MeasureOptions,
+) -> Result<centreline::Centreline, MeasureError> {
+    opts.validate()?;
+    let rough = geodesic::level_set_centres(surface, 2.0 * opts.station_spacing_mm)?;
+    let tracked = tracking::track(surface, &rough, opts.station_spacing_mm, opts.smoothing_mm)?;
+    let initial = centreline::Centreline::from_path(surface, tracked, opts);
+    centreline::refine(surface, initial, opts)
+}
+
+/// The station of `line` at arc length `s`, or `None` when no closed loop surrounds it.
+pub(crate) fn station_at(
+    surface: &Surface,
+    line: &centreline::Centreline,
+    s: f64,
+) -> Option<Station> {
+    let (centre, tangent) = line.frame_at(s);
+    let section = surface.wall_section_at(centre, tangent)?;
+    let (max, min) = section.feret();
+    Some(Station {
+        s_mm: s,
+        centre,
+        tangent,
+        area_mm2: section.area,
+        equivalent_diameter_mm: (4.0 * section.area / std::f64::consts::PI).sqrt(),
+        max_diameter_mm: max,
+        min_diameter_mm: min,
+    })
+}
+
+/// Stations of a prepared surface along its converged centreline.
+pub(crate) fn measure_prepared(
+    surface: &Surface,
+    opts: &MeasureOptions,
+) -> Result<(centreline::Centreline, VesselMeasurements), MeasureError> {
+    let line = vessel_centreline(surface, opts)?;
+    let positions = centreline::station_positions(line.length(), opts.station_spacing_mm);
+    let stations: Vec<Station> = positions
+        .iter()
+        .filter_map(|&s| station_at(surface, &line, s))
+        .collect();
+    if stations.len() * 4 < positions.len() * 3 {
+        return Err(MeasureError::NotTubular(format!(
+            "only {} of {} stations have a closed section around the centreline",
+            stations.len(),
+            positions.len()
+        )));
+    }
+    let mut diameters: Vec<f64> = stations.iter().map(|s| s.equivalent_diameter_mm).collect();
+    diameters.sort_by(f64::total_cmp);
+    let median = diameters[diameters.len() / 2];
+    if line.length() < median {
+        return Err(MeasureError::NotTubular(format!(
+            "the centreline ({:.2} mm) is shorter than the median diameter ({median:.2} mm)",
+            line.length()
+        )));
+    }
+    let measurements = VesselMeasurements {
+        centreline_length_mm: line.smoothed_length(0.25 * opts.station_spacing_mm),
+        stations,
+    };
+    Ok((line, measurements))
+}
+
+/// Centreline length and diameter profile of a tubular surface in millimetres (closed with
+/// caps or open at its ends).
+pub fn measure_vessel(
+    mesh: &crate::geometry::TriMesh,
+    opts: &MeasureOptions,
+) -> Result<VesselMeasurements, MeasureError> {
+    let surface = Surface::new(mesh)?;
+    measure_prepared(&surface, opts).map(|(_, m)| m)
+}
