@@ -29,6 +29,7 @@ pub(super) fn read(
         check_glb_header(bytes)
             .map_err(|msg| FormatError::malformed_at(name, format, "GLB header", msg))?;
     }
+    check_accessor_references(bytes, format).map_err(&malformed)?;
     let gltf = guard(|| gltf::Gltf::from_slice(bytes))
         .map_err(malformed)?
         .map_err(|e| malformed(e.to_string()))?;
@@ -55,6 +56,50 @@ pub(super) fn read(
         units,
         extras,
     })
+}
+
+/// Every primitive attribute and index reference must name an existing accessor. The `gltf`
+/// crate's own validation indexes the accessor list without checking, so a dangling reference
+/// would panic inside it instead of being reported.
+fn check_accessor_references(bytes: &[u8], format: MeshFormat) -> Result<(), String> {
+    let json: &[u8] = if format == MeshFormat::Glb {
+        match gltf::binary::Glb::from_slice(bytes) {
+            Ok(glb) => return check_accessor_json(&glb.json),
+            Err(e) => return Err(e.to_string()),
+        }
+    } else {
+        bytes
+    };
+    check_accessor_json(json)
+}
+
+fn check_accessor_json(json: &[u8]) -> Result<(), String> {
+    let Ok(root) = serde_json::from_slice::<serde_json::Value>(json) else {
+        return Ok(()); // the glTF parser reports malformed JSON with its position
+    };
+    let accessors = root["accessors"].as_array().map_or(0, Vec::len) as u64;
+    let meshes = root["meshes"]
+        .as_array()
+        .map(Vec::as_slice)
+        .unwrap_or_default();
+    for (m, mesh) in meshes.iter().enumerate() {
+        let primitives = mesh["primitives"]
+            .as_array()
+            .map(Vec::as_slice)
+            .unwrap_or_default();
+        for (p, primitive) in primitives.iter().enumerate() {
+            let attributes = primitive["attributes"].as_object().into_iter().flatten();
+            let indices = primitive.get("indices").map(|v| ("indices", v));
+            for (what, value) in attributes.map(|(k, v)| (k.as_str(), v)).chain(indices) {
+                if let Some(i) = value.as_u64().filter(|&i| i >= accessors) {
+                    return Err(format!(
+                        "mesh {m} primitive {p}: {what} refers to accessor {i}, but there are only {accessors}"
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Size and version checks the `gltf` crate leaves to arithmetic that can overflow.
