@@ -14,24 +14,7 @@ mod malformed;
 
 /// Unit cube, outward triangles, 8 shared vertices.
 fn cube() -> TriMesh {
-    let positions = (0..8)
-        .map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
-        .collect();
-    let triangles = vec![
-        [0, 2, 1],
-        [1, 2, 3],
-        [4, 5, 6],
-        [5, 7, 6],
-        [0, 1, 4],
-        [1, 5, 4],
-        [2, 6, 3],
-        [3, 6, 7],
-        [0, 4, 2],
-        [2, 4, 6],
-        [1, 3, 5],
-        [3, 7, 5],
-    ];
-    TriMesh::new(positions, triangles)
+    TriMesh::unit_cube()
 }
 
 /// A cube with coordinates that are not exactly representable in short decimals, plus

@@ -151,6 +151,29 @@ impl TriMesh {
         Ok(())
     }
 
+    /// The cube [0,1]³ as 8 shared vertices and 12 outward triangles: the smallest closed,
+    /// oriented mesh with exactly known area (6) and volume (1), for checks and examples.
+    pub fn unit_cube() -> Self {
+        let positions = (0..8)
+            .map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
+            .collect();
+        let triangles = vec![
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ];
+        Self::new(positions, triangles)
+    }
+
     /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
@@ -342,26 +365,8 @@ pub fn normalized(a: [f64; 3]) -> [f64; 3] {
 mod tests {
     use super::*;
 
-    /// A unit cube with outward-facing triangles.
-    pub(crate) fn cube() -> TriMesh {
-        let positions = (0..8)
-            .map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
-            .collect();
-        let triangles = vec![
-            [0, 2, 1],
-            [1, 2, 3], // z = 0, facing -z
-            [4, 5, 6],
-            [5, 7, 6], // z = 1
-            [0, 1, 4],
-            [1, 5, 4], // y = 0
-            [2, 6, 3],
-            [3, 6, 7], // y = 1
-            [0, 4, 2],
-            [2, 4, 6], // x = 0
-            [1, 3, 5],
-            [3, 7, 5], // x = 1
-        ];
-        TriMesh::new(positions, triangles)
+    fn cube() -> TriMesh {
+        TriMesh::unit_cube()
     }
 
     #[test]
