@@ -35,16 +35,12 @@ pub struct EvaluateArgs {
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Compute backend.
-    #[arg(long, default_value = "flex", value_parser = parse_backend)]
+    #[arg(long, default_value = "flex")]
     pub backend: Backend,
     /// Surface extraction: `fast` evaluates the network only near the surface, `dense` on
     /// every grid sample (the reference; both give the same mesh).
     #[arg(long, value_enum, default_value = "fast")]
     pub extraction: ExtractionMethod,
-}
-
-fn parse_backend(s: &str) -> Result<Backend, String> {
-    s.parse::<Backend>().map_err(|e| e.to_string())
 }
 
 /// Runs `aortagen evaluate`.

@@ -56,16 +56,12 @@ pub struct GenerateArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Compute backend.
-    #[arg(long, default_value = "flex", value_parser = parse_backend)]
+    #[arg(long, default_value = "flex")]
     pub backend: Backend,
     /// Surface extraction: `fast` evaluates the network only near the surface, `dense` on
     /// every grid sample (the reference; both give the same mesh).
     #[arg(long, value_enum, default_value = "fast")]
     pub extraction: ExtractionMethod,
-}
-
-fn parse_backend(s: &str) -> Result<Backend, String> {
-    s.parse::<Backend>().map_err(|e| e.to_string())
 }
 
 fn parse_format(s: &str) -> Result<MeshFormat, String> {

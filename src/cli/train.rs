@@ -61,12 +61,8 @@ pub struct TrainArgs {
     #[arg(long)]
     pub resume: bool,
     /// Compute backend.
-    #[arg(long, default_value = "flex", value_parser = parse_backend)]
+    #[arg(long, default_value = "flex")]
     pub backend: Backend,
-}
-
-fn parse_backend(s: &str) -> Result<Backend, String> {
-    s.parse::<Backend>().map_err(|e| e.to_string())
 }
 
 impl TrainArgs {
