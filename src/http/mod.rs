@@ -10,6 +10,7 @@ pub mod metrics;
 pub mod model_upload;
 pub mod models;
 pub mod openapi;
+pub mod reports;
 pub mod shapes;
 
 use std::sync::Arc;
@@ -54,6 +55,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(cohorts::router())
         .merge(shapes::router())
         .merge(jobs::router())
+        .merge(reports::router())
 }
 
 /// The complete application: routes, fallbacks, limits, tracing and metrics.

@@ -25,6 +25,7 @@ use super::AppState;
         (name = "shapes", description = "Generated shapes and their meshes"),
         (name = "models", description = "Registered generative models"),
         (name = "jobs", description = "Background work"),
+        (name = "reports", description = "Plots (SVG) and self-contained HTML reports of models and cohorts"),
         (name = "operations", description = "Health, metrics and documentation"),
     )
 )]
