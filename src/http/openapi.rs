@@ -90,6 +90,8 @@ impl Modify for AccessDocs {
                 r.entry("401".into()).or_insert(unauthorized.into());
                 let forbidden = problem("Not a valid API key, when reads are protected");
                 r.entry("403".into()).or_insert(forbidden.into());
+                let busy = problem("Too many requests in flight (see Retry-After)");
+                r.entry("503".into()).or_insert(busy.into());
             }
             let writes = [
                 &mut item.post,

@@ -38,6 +38,7 @@ pub(super) fn router() -> OpenApiRouter<AppState> {
         (status = 202, body = CohortView, description = "Accepted; `Location` names the cohort"),
         (status = 400, body = Problem, content_type = "application/problem+json"),
         (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown model"),
+        (status = 413, body = Problem, content_type = "application/problem+json", description = "Body over the JSON size limit"),
         (status = 415, body = Problem, content_type = "application/problem+json"),
         (status = 422, body = Problem, content_type = "application/problem+json", description = "A rule is broken, e.g. `count` over the work budget `count × resolution³`"),
         (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After"),
