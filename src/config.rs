@@ -122,14 +122,15 @@ pub struct Config {
     pub log_json: bool,
 }
 
+#[derive(clap::Parser)]
+struct Wrapper {
+    #[command(flatten)]
+    config: Config,
+}
+
 impl Config {
     /// Defaults with a different database and bind address (tests, embedding).
     pub fn with_database(database_url: impl Into<String>, bind: impl Into<String>) -> Self {
-        #[derive(clap::Parser)]
-        struct Wrapper {
-            #[command(flatten)]
-            config: Config,
-        }
         let mut config = <Wrapper as clap::Parser>::parse_from(["aortagen"]).config;
         config.database_url = database_url.into();
         config.bind = bind.into();
@@ -141,5 +142,32 @@ impl Config {
         self.workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
             .max(1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn api_keys_are_a_comma_separated_list_and_debug_hides_them() {
+        let args = ["aortagen", "--api-keys", "alpha, beta", "--protect-reads"];
+        let config = <Wrapper as clap::Parser>::parse_from(args).config;
+        let keys: Vec<&str> = config.api_keys.iter().map(ApiKey::expose).collect();
+        assert_eq!(keys, ["alpha", "beta"]);
+        assert!(config.protect_reads);
+        let shown = format!("{config:?}");
+        assert!(
+            !shown.contains("alpha") && !shown.contains("beta"),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn default_limits_allow_100_shapes_at_256() {
+        let config = Config::with_database("sqlite::memory:", "127.0.0.1:0");
+        assert!(100 * 256u64.pow(3) <= config.max_cohort_voxels);
+        assert_eq!(config.max_json_bytes, 1024 * 1024);
+        assert_eq!(config.max_in_flight, 512);
     }
 }

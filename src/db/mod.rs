@@ -186,3 +186,38 @@ impl ReadOnlySwitch {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn storage_faults_are_found_anywhere_in_an_error_chain() {
+        let full = std::io::Error::from(std::io::ErrorKind::StorageFull);
+        let err = anyhow::Error::from(full).context("cannot write 0001.stl");
+        assert_eq!(storage_fault_in(&err), Some(StorageFault::Full));
+        let ro = sqlx::Error::Io(std::io::ErrorKind::ReadOnlyFilesystem.into());
+        assert_eq!(storage_fault(&ro), Some(StorageFault::ReadOnly));
+        let other = anyhow::anyhow!("engine diverged");
+        assert_eq!(storage_fault_in(&other), None);
+    }
+
+    #[tokio::test]
+    async fn the_switch_makes_writes_fail_as_on_a_read_only_file_and_reads_work() {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}", dir.path().join("t.db").display());
+        let switch = ReadOnlySwitch::default();
+        let pool = connect_with_switch(&url, 2, &switch).await.unwrap();
+        probe_write(&pool).await.unwrap();
+        switch.set(true);
+        let err = probe_write(&pool).await.unwrap_err();
+        assert_eq!(storage_fault(&err), Some(StorageFault::ReadOnly), "{err}");
+        let n: i64 = sqlx::query_scalar("select count(*) from storage_probe")
+            .fetch_one(&pool)
+            .await
+            .unwrap();
+        assert_eq!(n, 1);
+        switch.set(false);
+        probe_write(&pool).await.unwrap();
+    }
+}

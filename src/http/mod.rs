@@ -65,8 +65,8 @@ pub fn api_router() -> OpenApiRouter<AppState> {
 }
 
 /// The complete application: routes, fallbacks, limits, access control, tracing and
-/// metrics. From the outside in: tracing, the in-flight bound, the deadline, metrics (so
-/// refused and timed-out requests are counted), the key check, body limits, the handler.
+/// metrics. From the outside in: tracing, metrics (so refused and timed-out requests are
+/// counted), the in-flight bound, the deadline, the key check, body limits, the handler.
 pub fn router(state: AppState) -> Router {
     let (routes, _) = api_router().split_for_parts();
     let limit = state.config.max_upload_bytes;
@@ -79,7 +79,6 @@ pub fn router(state: AppState) -> Router {
             state.access.clone(),
             access::require_key,
         ))
-        .layer(middleware::from_fn_with_state(state.clone(), track_metrics))
         .layer(middleware::from_fn_with_state(
             limits.clone(),
             limits::deadline,
@@ -88,6 +87,7 @@ pub fn router(state: AppState) -> Router {
             limits,
             limits::bound_in_flight,
         ))
+        .layer(middleware::from_fn_with_state(state.clone(), track_metrics))
         .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
             let route = req
                 .extensions()
