@@ -46,7 +46,8 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_RETRY_AFTER_SECS", default_value_t = 30)]
     pub retry_after_secs: u64,
 
-    /// Times a job may be interrupted by a stopping process before it is failed.
+    /// Times in a row a job may be interrupted by a dying process without committing any
+    /// progress before it is failed.
     #[arg(long, env = "AORTAGEN_MAX_ATTEMPTS", default_value_t = 5)]
     pub max_attempts: i64,
 

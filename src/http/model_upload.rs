@@ -14,6 +14,10 @@ use crate::db;
 use crate::formats::{MeshFormat, read_mesh_bytes};
 use crate::jobs::engine::TrainingSpec;
 use crate::jobs::training::TrainingPayload;
+use crate::sdf::config::Preset;
+
+/// Most epochs a training request may ask for (the paper preset's count).
+const MAX_EPOCHS: u64 = 5000;
 
 /// Accepted upload (documentation of the multipart form).
 #[derive(Debug, utoipa::ToSchema)]
@@ -23,6 +27,8 @@ pub struct ModelUpload {
     id: Option<String>,
     /// Training seed.
     seed: Option<u64>,
+    /// Epochs to train, 1–5000 (default: the CPU preset's 240).
+    epochs: Option<u64>,
     /// Two or more mesh files (STL, OBJ, PLY, GLB, glTF), one part each, named `files`.
     #[schema(value_type = Vec<String>, format = Binary)]
     files: Vec<Vec<u8>>,
@@ -57,7 +63,8 @@ pub(super) async fn create_model(
         got: e.body_text(),
     })?;
     let limit = state.config.max_upload_bytes;
-    let (mut id, mut seed, mut files) = (None, 0u64, Vec::<(String, Vec<u8>)>::new());
+    let (mut id, mut seed, mut epochs, mut files) =
+        (None, 0u64, None, Vec::<(String, Vec<u8>)>::new());
     while let Some(field) = multipart
         .next_field()
         .await
@@ -75,6 +82,18 @@ pub(super) async fn create_model(
                     .map_err(|_| {
                         ApiError::invalid("seed", "type", "must be a non-negative integer")
                     })?
+            }
+            "epochs" => {
+                let parsed = String::from_utf8_lossy(&bytes).trim().parse::<u64>().ok();
+                epochs = Some(parsed.filter(|e| (1..=MAX_EPOCHS).contains(e)).ok_or_else(
+                    || {
+                        ApiError::invalid(
+                            "epochs",
+                            "range",
+                            format!("must be an integer from 1 to {MAX_EPOCHS}"),
+                        )
+                    },
+                )?);
             }
             "files" | "file" => {
                 let file_name = file_name.unwrap_or_else(|| format!("file-{}", files.len()));
@@ -132,10 +151,12 @@ pub(super) async fn create_model(
             input_dir,
             model_dir: model_dir.clone(),
             seed,
+            epochs,
         },
     };
     let payload = serde_json::to_value(payload).map_err(anyhow::Error::from)?;
-    let job_id = db::jobs::enqueue(&mut tx, "training", &payload, 1).await?;
+    let total_epochs = epochs.unwrap_or_else(|| Preset::Cpu.setup(seed).training.epochs);
+    let job_id = db::jobs::enqueue(&mut tx, "training", &payload, total_epochs as i64).await?;
     tx.commit().await?;
     state.job_wake.notify_one();
     let body = TrainingAccepted {
