@@ -34,6 +34,14 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_MAX_UPLOAD_BYTES", default_value_t = 256 * 1024 * 1024)]
     pub max_upload_bytes: usize,
 
+    /// Most entries in an uploaded zip archive of training meshes.
+    #[arg(long, env = "AORTAGEN_MAX_ARCHIVE_ENTRIES", default_value_t = 1000)]
+    pub max_archive_entries: usize,
+
+    /// Most bytes an uploaded zip archive may expand to (guards against zip bombs).
+    #[arg(long, env = "AORTAGEN_MAX_ARCHIVE_BYTES", default_value_t = 1024 * 1024 * 1024)]
+    pub max_archive_bytes: usize,
+
     /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to it.
     #[arg(long, env = "AORTAGEN_MODELS_DIR", default_value = "models")]
     pub models_dir: PathBuf,

@@ -11,6 +11,7 @@ pub mod model_upload;
 pub mod models;
 pub mod openapi;
 pub mod shapes;
+pub mod upload_archive;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};

@@ -24,6 +24,10 @@ pub const MAX_COUNT: u32 = 50;
 pub const MAX_QUEUE: i64 = 3;
 /// Body limit in tests.
 pub const MAX_UPLOAD: usize = 64 * 1024;
+/// Most entries of an uploaded zip archive in tests.
+pub const MAX_ARCHIVE_ENTRIES: usize = 8;
+/// Most bytes an uploaded zip archive may expand to in tests.
+pub const MAX_ARCHIVE_BYTES: usize = 256 * 1024;
 
 /// A running test service.
 pub struct TestApp {
@@ -93,6 +97,8 @@ pub async fn spawn_on(engine: AnalyticEngine, dir: Arc<tempfile::TempDir>, url: 
     config.max_count = MAX_COUNT;
     config.max_queue = MAX_QUEUE;
     config.max_upload_bytes = MAX_UPLOAD;
+    config.max_archive_entries = MAX_ARCHIVE_ENTRIES;
+    config.max_archive_bytes = MAX_ARCHIVE_BYTES;
     config.models_dir = dir.path().join("models");
     let engine = Arc::new(engine);
     let app = Application::build(config, engine.clone())
