@@ -89,3 +89,38 @@ fn sigterm_mid_cohort_exits_cleanly_and_the_cohort_resumes() {
     let (status, _, log) = server.terminate(Duration::from_secs(10));
     assert!(status.is_some_and(|s| s.success()), "{log}");
 }
+
+/// A shape too large to finish within the grace period: the process still exits 0 within
+/// 10 s, abandoning the shape, and the job is back in the queue.
+#[test]
+fn sigterm_during_a_long_shape_exits_within_the_grace_period() {
+    let mut dir = ServiceDir::new();
+    let server = dir.start(1);
+    let body = json!({ "model_id": "default", "count": 1, "arity": 2,
+                       "seed": 9, "resolution": 1024 });
+    let r = server.post_json("/v1/cohorts", &body);
+    assert_eq!(r.status, 202, "{}", r.text());
+    let job = r.json()["job_id"].as_i64().unwrap();
+    let start = Instant::now();
+    while server.get_json(&format!("/v1/jobs/{job}"))["status"] != "running" {
+        assert!(start.elapsed() < Duration::from_secs(60));
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let (status, took, log) = server.terminate(Duration::from_secs(10));
+    let status = status.unwrap_or_else(|| panic!("still running 10 s after SIGTERM:\n{log}"));
+    assert!(status.success(), "exit status {status}:\n{log}");
+    assert!(took < Duration::from_secs(10), "{took:?}");
+    assert!(
+        log.contains("did not stop within the shutdown grace period"),
+        "the shape was abandoned:\n{log}"
+    );
+    let status = server::with_database(&dir.database(), async move |pool| {
+        sqlx::query_scalar::<_, String>("select status from job where job_id = ?")
+            .bind(job)
+            .fetch_one(pool)
+            .await
+            .unwrap()
+    });
+    assert_eq!(status, "queued");
+}
