@@ -95,6 +95,13 @@ pub struct Config {
     /// Require an API key for reads too (health, readiness and metrics stay public).
     #[arg(long, env = "AORTAGEN_PROTECT_READS", default_value_t = false)]
     pub protect_reads: bool,
+    /// Most entries in an uploaded zip archive of training meshes.
+    #[arg(long, env = "AORTAGEN_MAX_ARCHIVE_ENTRIES", default_value_t = 1000)]
+    pub max_archive_entries: usize,
+
+    /// Most bytes an uploaded zip archive may expand to (guards against zip bombs).
+    #[arg(long, env = "AORTAGEN_MAX_ARCHIVE_BYTES", default_value_t = 1024 * 1024 * 1024)]
+    pub max_archive_bytes: usize,
 
     /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to it.
     #[arg(long, env = "AORTAGEN_MODELS_DIR", default_value = "models")]
@@ -104,8 +111,8 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_REQUEST_TIMEOUT_SECS", default_value_t = 30)]
     pub request_timeout_secs: u64,
 
-    /// Seconds a multipart upload (`POST /v1/models`) may take before it is answered 408;
-    /// longer than the request timeout so a large upload on a slow link completes.
+    /// Seconds a model upload (`POST /v1/models`, multipart or a zip body) may take before it
+    /// is answered 408; longer than the request timeout so a large upload on a slow link completes.
     #[arg(long, env = "AORTAGEN_UPLOAD_TIMEOUT_SECS", default_value_t = 600)]
     pub upload_timeout_secs: u64,
 
@@ -113,7 +120,8 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_RETRY_AFTER_SECS", default_value_t = 30)]
     pub retry_after_secs: u64,
 
-    /// Times a job may be interrupted by a stopping process before it is failed.
+    /// Times in a row a job may be interrupted by a dying process without committing any
+    /// progress before it is failed.
     #[arg(long, env = "AORTAGEN_MAX_ATTEMPTS", default_value_t = 5)]
     pub max_attempts: i64,
 

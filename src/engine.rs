@@ -4,7 +4,7 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, bail};
@@ -21,9 +21,10 @@ use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
 use crate::sdf::evaluation::EvaluationReport;
 use crate::sdf::generate::Mixture;
+use crate::sdf::manifest::MANIFEST_FILE;
 use crate::sdf::reconstruct::{ExtractionMethod, reconstruct};
 use crate::sdf::store::LoadedModel;
-use crate::sdf::training::{Silent, TrainingRequest, train};
+use crate::sdf::training::{TrainingObserver, TrainingRequest, train};
 
 /// File in a model directory holding `aortagen evaluate --json` output; when present, its
 /// per-shape reconstruction Chamfer distances are reported with the model.
@@ -152,22 +153,69 @@ impl CohortEngine for SdfEngine {
         Ok(pairwise_chamfer(&sets))
     }
 
-    fn train_model(&self, spec: &TrainingSpec, cancel: &AtomicBool) -> anyhow::Result<ModelInfo> {
-        let request = TrainingRequest {
+    fn train_model(
+        &self,
+        spec: &TrainingSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<ModelInfo> {
+        let mut setup = Preset::Cpu.setup(spec.seed);
+        if let Some(epochs) = spec.epochs {
+            setup.training.epochs = epochs;
+        }
+        // At least ten checkpoints per run: an interrupted job loses at most a tenth.
+        let every = (setup.training.epochs / 10).max(1);
+        setup.training.checkpoint_every = setup.training.checkpoint_every.min(every);
+        let request = |resume| TrainingRequest {
             out_dir: spec.model_dir.clone(),
             source: DataSource::Directory {
                 path: spec.input_dir.clone(),
             },
-            setup: Preset::Cpu.setup(spec.seed),
+            setup: setup.clone(),
             backend: self.backend,
-            resume: false,
+            resume,
             stop: Some(cancel),
         };
-        let outcome = train(&request, &mut Silent)?;
+        let mut observer = SavedEpochs(progress);
+        // A checkpoint exists when an earlier run was interrupted (shutdown or a killed
+        // process); continue it. A process killed while saving can leave files that do not
+        // match their manifest: such a checkpoint cannot be resumed and training starts over.
+        let outcome = if spec.model_dir.join(MANIFEST_FILE).exists() {
+            match train(&request(true), &mut observer) {
+                Ok(outcome) => outcome,
+                Err(e) if !cancel.load(Ordering::SeqCst) => {
+                    tracing::warn!(
+                        error = format!("{e:#}"),
+                        "the training checkpoint cannot be resumed; starting over"
+                    );
+                    let manifest = spec.model_dir.join(MANIFEST_FILE);
+                    std::fs::remove_file(&manifest)
+                        .with_context(|| format!("cannot remove {}", manifest.display()))?;
+                    progress.store(0, Ordering::SeqCst);
+                    train(&request(false), &mut observer)?
+                }
+                Err(e) => return Err(e),
+            }
+        } else {
+            train(&request(false), &mut observer)?
+        };
         if !outcome.finished {
             bail!("training was stopped before its last epoch");
         }
         self.model_info(&spec.model_dir)
+    }
+}
+
+/// Publishes the epochs saved in a checkpoint to the job that runs the training.
+struct SavedEpochs<'a>(&'a AtomicU64);
+
+impl TrainingObserver for SavedEpochs<'_> {
+    fn on_start(&mut self, _epochs: u64, first_epoch: u64, _batches_per_epoch: u64) {
+        self.0.store(first_epoch, Ordering::SeqCst);
+    }
+
+    fn on_checkpoint(&mut self, epochs_completed: u64) {
+        self.0.store(epochs_completed, Ordering::SeqCst);
     }
 }
 

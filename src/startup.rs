@@ -1,9 +1,10 @@
 //! The service lifecycle: open and migrate the database, recover interrupted jobs, register
 //! the bundled model, bind, then serve and run workers until a shutdown signal.
 
-use std::future::Future;
+use std::future::{Future, IntoFuture};
 use std::path::Path;
 use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::Context;
 use sqlx::SqlitePool;
@@ -17,6 +18,10 @@ use crate::http::{self, AppState};
 use crate::jobs::engine::CohortEngine;
 use crate::jobs::{JobContext, JobControls, worker};
 use crate::telemetry::ServiceMetrics;
+
+/// Longest a shutdown waits for running jobs and open requests before abandoning them.
+/// Container runtimes usually allow 10 s between SIGTERM and SIGKILL.
+pub const SHUTDOWN_GRACE: Duration = Duration::from_secs(7);
 
 /// Id under which the bundled model is registered.
 pub const DEFAULT_MODEL_ID: &str = "default";
@@ -103,14 +108,16 @@ impl Application {
 
     /// Serves HTTP and runs `workers` job workers until `shutdown` resolves. On shutdown
     /// the server stops accepting, running jobs are interrupted and re-queued with their
-    /// finished shapes kept, and the call returns once workers and connections are done.
+    /// finished shapes kept, and the call returns once workers and connections are done,
+    /// or after [`SHUTDOWN_GRACE`] at the latest: work that has not stopped by then (a shape
+    /// at a very high resolution, a slow client) is abandoned and its job re-queued.
     pub async fn run_until_stopped(
         self,
         workers: usize,
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> anyhow::Result<()> {
-        let (stop_tx, stop_rx) = watch::channel(false);
-        let handles: Vec<_> = (0..workers)
+        let (stop_tx, mut stop_rx) = watch::channel(false);
+        let mut handles: Vec<_> = (0..workers)
             .map(|i| {
                 let (ctx, wake, stop) = (
                     self.state.jobs.clone(),
@@ -123,21 +130,65 @@ impl Application {
         let controls = self.state.jobs.controls.clone();
         let app = http::router(self.state.clone());
         tracing::info!(port = self.port, workers, "listening");
-        let served = axum::serve(self.listener, app)
+        let serve = axum::serve(self.listener, app)
             .with_graceful_shutdown(async move {
                 shutdown.await;
                 tracing::info!("shutting down: interrupting running jobs");
                 controls.shut_down();
                 let _ = stop_tx.send(true);
             })
-            .await;
-        for h in handles {
-            if let Err(e) = h.await {
-                tracing::error!(error = %e, "worker ended abnormally");
-            }
+            .into_future();
+        let mut served = tokio::spawn(serve);
+        // Runs until the signal (or until the server fails, which also ends the service).
+        let early = tokio::select! {
+            joined = &mut served => Some(joined),
+            _ = stop_rx.wait_for(|stopped| *stopped) => None,
+        };
+        let deadline = tokio::time::Instant::now() + SHUTDOWN_GRACE;
+        if early.is_some() {
+            self.state.jobs.controls.shut_down();
         }
-        self.state.pool.close().await;
-        served.context("the HTTP server failed")
+        let workers_done = tokio::time::timeout_at(deadline, async {
+            for h in &mut handles {
+                if let Err(e) = h.await {
+                    tracing::error!(error = %e, "worker ended abnormally");
+                }
+            }
+        })
+        .await;
+        if workers_done.is_err() {
+            let abandoned = self.state.jobs.controls.running_jobs();
+            tracing::warn!(
+                jobs = ?abandoned,
+                "jobs did not stop within the shutdown grace period; re-queueing them"
+            );
+            for job_id in abandoned {
+                if let Err(e) = db::jobs::release(&self.state.pool, job_id).await {
+                    tracing::error!(job_id, error = %e, "cannot re-queue the job");
+                }
+            }
+            handles.iter().for_each(|h| h.abort());
+        }
+        let served = match early {
+            Some(joined) => joined,
+            None => match tokio::time::timeout_at(deadline, &mut served).await {
+                Ok(joined) => joined,
+                Err(_) => {
+                    tracing::warn!("connections still open after the grace period; closing");
+                    served.abort();
+                    Ok(Ok(()))
+                }
+            },
+        };
+        if tokio::time::timeout(Duration::from_secs(1), self.state.pool.close())
+            .await
+            .is_err()
+        {
+            tracing::warn!("database connections still busy at exit");
+        }
+        served
+            .context("the HTTP server task failed")?
+            .context("the HTTP server failed")
     }
 }
 

@@ -1,6 +1,7 @@
 //! `aortagen serve`: the cohort service (REST API + job workers) on a SQLite database.
 
 use std::sync::Arc;
+use std::time::Duration;
 
 use crate::config::Config;
 use crate::jobs::engine::CohortEngine;
@@ -23,10 +24,14 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         .enable_all()
         .thread_name("aortagen")
         .build()?;
-    runtime.block_on(async move {
+    let result = runtime.block_on(async move {
         let app = Application::build(args.config, engine()).await?;
         app.run_until_stopped(workers, shutdown_signal()).await
-    })
+    });
+    // Dropping the runtime would wait for engine work still running on blocking threads
+    // (its job is already back in the queue); the process exits without it.
+    runtime.shutdown_timeout(Duration::from_millis(500));
+    result
 }
 
 /// The science engine the service runs on: the trained SDF models.

@@ -90,6 +90,7 @@ pub async fn enqueue(
 pub async fn claim_next(pool: &SqlitePool) -> sqlx::Result<Option<ClaimedJob>> {
     sqlx::query_as(
         "update job set status = 'running', attempts = attempts + 1,
+             claim_progress = progress_done,
              started_at = coalesce(started_at, strftime('%Y-%m-%dT%H:%M:%fZ', 'now')),
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
          where job_id = (select job_id from job where status = 'queued' order by job_id limit 1)
@@ -99,19 +100,30 @@ pub async fn claim_next(pool: &SqlitePool) -> sqlx::Result<Option<ClaimedJob>> {
     .await
 }
 
-/// At startup: jobs left `running` by a stopped process go back to the queue, except those
-/// already claimed `max_attempts` times, which fail (a job that keeps killing the process
-/// must not loop forever). Returns (re-queued, failed).
+/// At startup: jobs left `running` by a stopped process go back to the queue. An
+/// interrupted run that committed progress (`progress_done` grew since the claim) clears the
+/// job's stall count; one that did not adds to it, and a job stalled `max_attempts` times in
+/// a row fails, so a job that keeps killing the process cannot loop forever while a long
+/// job on a host that is restarted often still finishes. Returns (re-queued, failed).
 pub async fn requeue_interrupted(pool: &SqlitePool, max_attempts: i64) -> sqlx::Result<(u64, u64)> {
+    let mut tx = pool.begin_with(super::BEGIN_WRITE).await?;
+    sqlx::query(
+        "update job set stalled_attempts = case when progress_done > claim_progress then 0
+                                                else stalled_attempts + 1 end
+         where status = 'running'",
+    )
+    .execute(&mut *tx)
+    .await?;
     let failed = sqlx::query(
         "update job set status = 'failed', cancel_requested = 0,
-             error = 'interrupted ' || attempts || ' times while running; not retried again',
+             error = 'interrupted ' || stalled_attempts ||
+                     ' times in a row without progress; not retried again',
              finished_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now'),
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where status = 'running' and attempts >= ?",
+         where status = 'running' and stalled_attempts >= ?",
     )
     .bind(max_attempts)
-    .execute(pool)
+    .execute(&mut *tx)
     .await?
     .rows_affected();
     let requeued = sqlx::query(
@@ -119,9 +131,10 @@ pub async fn requeue_interrupted(pool: &SqlitePool, max_attempts: i64) -> sqlx::
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
          where status = 'running'",
     )
-    .execute(pool)
+    .execute(&mut *tx)
     .await?
     .rows_affected();
+    tx.commit().await?;
     Ok((requeued, failed))
 }
 

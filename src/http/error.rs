@@ -61,6 +61,9 @@ pub enum ApiError {
         /// The limit.
         limit: usize,
     },
+    /// An uploaded archive over its entry or expanded-size bound (413).
+    #[error("{0}")]
+    ArchiveTooLarge(String),
     /// The resource's state forbids the operation (409).
     #[error("{0}")]
     Conflict(String),
@@ -179,7 +182,9 @@ impl ApiError {
             Self::Validation { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             Self::BadRequest { .. } | Self::MalformedJson { .. } => StatusCode::BAD_REQUEST,
             Self::UnsupportedMediaType { .. } => StatusCode::UNSUPPORTED_MEDIA_TYPE,
-            Self::PayloadTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            Self::PayloadTooLarge { .. } | Self::ArchiveTooLarge(_) => {
+                StatusCode::PAYLOAD_TOO_LARGE
+            }
             Self::Conflict(_) => StatusCode::CONFLICT,
             Self::QueueFull { .. } => StatusCode::TOO_MANY_REQUESTS,
             Self::Unavailable(_) | Self::StorageUnavailable(_) | Self::Overloaded { .. } => {
@@ -199,7 +204,7 @@ impl ApiError {
             Self::BadRequest { .. } => "bad-request",
             Self::MalformedJson { .. } => "malformed-json",
             Self::UnsupportedMediaType { .. } => "unsupported-media-type",
-            Self::PayloadTooLarge { .. } => "payload-too-large",
+            Self::PayloadTooLarge { .. } | Self::ArchiveTooLarge(_) => "payload-too-large",
             Self::Conflict(_) => "conflict",
             Self::QueueFull { .. } => "queue-full",
             Self::Unavailable(_) => "unavailable",

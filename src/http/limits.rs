@@ -53,9 +53,9 @@ pub async fn bound_in_flight(State(limits): State<Limits>, req: Request, next: N
 
 /// Answers 408 when the response is not ready within the deadline. The deadline covers
 /// reading the request and building the response, not sending a response body, so a long
-/// download is not cut. A multipart upload gets the longer upload deadline.
+/// download is not cut. An upload (multipart or a zip body) gets the longer upload deadline.
 pub async fn deadline(State(limits): State<Limits>, req: Request, next: Next) -> Response {
-    let seconds = if is_multipart(&req) {
+    let seconds = if is_upload(&req) {
         limits.upload_timeout
     } else {
         limits.request_timeout
@@ -74,13 +74,12 @@ pub async fn deadline(State(limits): State<Limits>, req: Request, next: Next) ->
     }
 }
 
-fn is_multipart(req: &Request) -> bool {
+fn is_upload(req: &Request) -> bool {
     req.headers()
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
         .is_some_and(|v| {
-            v.trim_start()
-                .to_ascii_lowercase()
-                .starts_with("multipart/form-data")
+            let v = v.trim_start().to_ascii_lowercase();
+            v.starts_with("multipart/form-data") || v.starts_with("application/zip")
         })
 }

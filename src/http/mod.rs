@@ -14,6 +14,7 @@ pub mod models;
 pub mod openapi;
 pub mod reports;
 pub mod shapes;
+pub mod upload_archive;
 
 use std::sync::Arc;
 use std::time::Instant;

@@ -1,19 +1,27 @@
-//! `POST /v1/models`: upload training meshes (multipart) and train a new model as a job.
+//! `POST /v1/models`: upload training meshes (multipart, or a zip archive) and train a new
+//! model as a job.
 //! Every file is parsed and validated before anything is stored; a bad one is a 422 that
 //! names it.
 
 use axum::Json;
-use axum::extract::{Multipart, State};
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{StatusCode, header};
 use axum::response::IntoResponse;
 use serde::Serialize;
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
+use super::extract::ApiQuery;
+use super::upload_archive::{ArchiveLimits, looks_like_zip, unpack};
 use crate::db;
 use crate::formats::{MeshFormat, read_mesh_bytes};
 use crate::jobs::engine::TrainingSpec;
 use crate::jobs::training::TrainingPayload;
+use crate::sdf::config::Preset;
+
+/// Most epochs a training request may ask for (the paper preset's count).
+const MAX_EPOCHS: u64 = 5000;
 
 /// Accepted upload (documentation of the multipart form).
 #[derive(Debug, utoipa::ToSchema)]
@@ -23,7 +31,10 @@ pub struct ModelUpload {
     id: Option<String>,
     /// Training seed.
     seed: Option<u64>,
-    /// Two or more mesh files (STL, OBJ, PLY, GLB, glTF), one part each, named `files`.
+    /// Epochs to train, 1–5000 (default: the CPU preset's 240).
+    epochs: Option<u64>,
+    /// Two or more mesh files (STL, OBJ, PLY, GLB, glTF), one part each, named `files`; a
+    /// part that is a zip archive counts as the mesh files inside it.
     #[schema(value_type = Vec<String>, format = Binary)]
     files: Vec<Vec<u8>>,
 }
@@ -39,9 +50,15 @@ pub struct TrainingAccepted {
     pub shapes: usize,
 }
 
-/// Trains a new model from uploaded meshes; answers 202 with the training job.
+/// Trains a new model from uploaded meshes; answers 202 with the training job. The meshes
+/// come as multipart parts (a part may be a zip archive of meshes) or as one zip archive
+/// body (`application/zip`, deflate or stored) with `id`, `seed` and `epochs` in the query.
 #[utoipa::path(post, path = "/v1/models", tag = "models",
-    request_body(content = ModelUpload, content_type = "multipart/form-data"),
+    params(UploadQuery),
+    request_body(content(
+        (ModelUpload = "multipart/form-data"),
+        (Vec<u8> = "application/zip")
+    )),
     responses((status = 202, body = TrainingAccepted),
               (status = 409, body = Problem, content_type = "application/problem+json", description = "Id taken"),
               (status = 413, body = Problem, content_type = "application/problem+json"),
@@ -50,44 +67,66 @@ pub struct TrainingAccepted {
               (status = 429, body = Problem, content_type = "application/problem+json")))]
 pub(super) async fn create_model(
     State(state): State<AppState>,
-    multipart: std::result::Result<Multipart, axum::extract::multipart::MultipartRejection>,
+    ApiQuery(query): ApiQuery<UploadQuery>,
+    request: Request,
 ) -> Result<impl IntoResponse> {
-    let mut multipart = multipart.map_err(|e| ApiError::UnsupportedMediaType {
-        expected: "multipart/form-data",
-        got: e.body_text(),
-    })?;
     let limit = state.config.max_upload_bytes;
-    let (mut id, mut seed, mut files) = (None, 0u64, Vec::<(String, Vec<u8>)>::new());
-    while let Some(field) = multipart
-        .next_field()
-        .await
-        .map_err(|e| upload_error(e, limit))?
-    {
-        let name = field.name().unwrap_or("").to_owned();
-        let file_name = field.file_name().map(str::to_owned);
-        let bytes = field.bytes().await.map_err(|e| upload_error(e, limit))?;
-        match name.as_str() {
-            "id" => id = Some(String::from_utf8_lossy(&bytes).trim().to_owned()),
-            "seed" => {
-                seed = String::from_utf8_lossy(&bytes)
-                    .trim()
-                    .parse()
-                    .map_err(|_| {
-                        ApiError::invalid("seed", "type", "must be a non-negative integer")
-                    })?
-            }
-            "files" | "file" => {
-                let file_name = file_name.unwrap_or_else(|| format!("file-{}", files.len()));
-                files.push((file_name, bytes.to_vec()));
-            }
-            other => {
-                return Err(ApiError::invalid(
-                    other,
-                    "unknown-field",
-                    "unexpected form field",
-                ));
+    let archive_limits = ArchiveLimits {
+        entries: state.config.max_archive_entries,
+        bytes: state.config.max_archive_bytes,
+    };
+    let (mut id, mut seed, mut epochs) = (query.id, query.seed.unwrap_or(0), query.epochs);
+    let mut files = Vec::<(String, Vec<u8>)>::new();
+    if is_zip_body(request.headers()) {
+        let body = Bytes::from_request(request, &state)
+            .await
+            .map_err(|e| body_error(e.status(), e.body_text(), limit))?;
+        files = unpack_blocking(BODY_ARCHIVE.into(), body, archive_limits).await?;
+    } else {
+        let mut multipart = Multipart::from_request(request, &state)
+            .await
+            .map_err(|e| ApiError::UnsupportedMediaType {
+                expected: "multipart/form-data or application/zip",
+                got: e.body_text(),
+            })?;
+        while let Some(field) = multipart
+            .next_field()
+            .await
+            .map_err(|e| body_error(e.status(), e.body_text(), limit))?
+        {
+            let name = field.name().unwrap_or("").to_owned();
+            let file_name = field.file_name().map(str::to_owned);
+            let bytes = field
+                .bytes()
+                .await
+                .map_err(|e| body_error(e.status(), e.body_text(), limit))?;
+            match name.as_str() {
+                "id" => id = Some(String::from_utf8_lossy(&bytes).trim().to_owned()),
+                "seed" => seed = parse_number("seed", &bytes)?,
+                "epochs" => epochs = Some(parse_number("epochs", &bytes)?),
+                "files" | "file" => {
+                    let file_name = file_name.unwrap_or_else(|| format!("file-{}", files.len()));
+                    if looks_like_zip(Some(&file_name), &bytes) {
+                        files.extend(unpack_blocking(file_name, bytes, archive_limits).await?);
+                    } else {
+                        files.push((file_name, bytes.to_vec()));
+                    }
+                }
+                other => {
+                    return Err(ApiError::invalid(
+                        other,
+                        "unknown-field",
+                        "unexpected form field",
+                    ));
+                }
             }
         }
+    }
+    if let Some(e) = epochs
+        && !(1..=MAX_EPOCHS).contains(&e)
+    {
+        let msg = format!("must be an integer from 1 to {MAX_EPOCHS}");
+        return Err(ApiError::invalid("epochs", "range", msg));
     }
     let model_id =
         id.unwrap_or_else(|| format!("model-{}", std::process::id() ^ rand::random::<u32>()));
@@ -132,10 +171,12 @@ pub(super) async fn create_model(
             input_dir,
             model_dir: model_dir.clone(),
             seed,
+            epochs,
         },
     };
     let payload = serde_json::to_value(payload).map_err(anyhow::Error::from)?;
-    let job_id = db::jobs::enqueue(&mut tx, "training", &payload, 1).await?;
+    let total_epochs = epochs.unwrap_or_else(|| Preset::Cpu.setup(seed).training.epochs);
+    let job_id = db::jobs::enqueue(&mut tx, "training", &payload, total_epochs as i64).await?;
     tx.commit().await?;
     state.job_wake.notify_one();
     let body = TrainingAccepted {
@@ -150,15 +191,60 @@ pub(super) async fn create_model(
     ))
 }
 
-fn upload_error(e: axum::extract::multipart::MultipartError, limit: usize) -> ApiError {
-    if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+/// Name of an archive sent as the whole body, in messages.
+const BODY_ARCHIVE: &str = "upload.zip";
+
+/// Query parameters: the form fields, for a zip body (form fields override them).
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
+pub struct UploadQuery {
+    /// Id for the new model (see the form field).
+    pub id: Option<String>,
+    /// Training seed.
+    pub seed: Option<u64>,
+    /// Epochs to train, 1–5000.
+    pub epochs: Option<u64>,
+}
+
+fn is_zip_body(headers: &axum::http::HeaderMap) -> bool {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .is_some_and(|t| {
+            let t = t.trim();
+            t.eq_ignore_ascii_case("application/zip")
+                || t.eq_ignore_ascii_case("application/x-zip-compressed")
+        })
+}
+
+fn body_error(status: StatusCode, text: String, limit: usize) -> ApiError {
+    if status == StatusCode::PAYLOAD_TOO_LARGE {
         ApiError::PayloadTooLarge { limit }
     } else {
         ApiError::BadRequest {
             field: None,
-            message: format!("unreadable multipart body: {}", e.body_text()),
+            message: format!("unreadable request body: {text}"),
         }
     }
+}
+
+fn parse_number(field: &'static str, bytes: &[u8]) -> Result<u64> {
+    String::from_utf8_lossy(bytes)
+        .trim()
+        .parse()
+        .map_err(|_| ApiError::invalid(field, "type", "must be a non-negative integer"))
+}
+
+/// Unpacks an archive off the executor (decompression is CPU work).
+async fn unpack_blocking(
+    name: String,
+    bytes: Bytes,
+    limits: ArchiveLimits,
+) -> Result<Vec<(String, Vec<u8>)>> {
+    tokio::task::spawn_blocking(move || unpack(&name, &bytes, limits))
+        .await
+        .map_err(anyhow::Error::from)?
 }
 
 fn check_model_id(id: &str) -> Result<()> {

@@ -3,7 +3,7 @@
 //! the whole service on an analytic stand-in.
 
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 
 use serde::{Deserialize, Serialize};
 
@@ -76,6 +76,9 @@ pub struct TrainingSpec {
     pub model_dir: std::path::PathBuf,
     /// Seed for initialisation and sampling.
     pub seed: u64,
+    /// Epochs to train (the engine's default when absent).
+    #[serde(default)]
+    pub epochs: Option<u64>,
 }
 
 /// The science engine, as the job worker calls it. Every method is blocking CPU work and is
@@ -96,8 +99,15 @@ pub trait CohortEngine: Send + Sync + 'static {
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>>;
 
     /// Trains a model from the meshes in `spec.input_dir`, writes it to `spec.model_dir`
-    /// and reports its facts. Returns early with an error once `cancel` becomes true.
-    fn train_model(&self, spec: &TrainingSpec, cancel: &AtomicBool) -> anyhow::Result<ModelInfo>;
+    /// and reports its facts. A run interrupted earlier continues from its last checkpoint
+    /// in `spec.model_dir`. `progress` holds the epochs completed and saved so far (what an
+    /// interruption cannot lose). Returns early with an error once `cancel` becomes true.
+    fn train_model(
+        &self,
+        spec: &TrainingSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<ModelInfo>;
 }
 
 /// An engine that refuses every call: what the service runs on when no science engine is
@@ -129,7 +139,12 @@ impl CohortEngine for UnavailableEngine {
         self.refuse()
     }
 
-    fn train_model(&self, _: &TrainingSpec, _: &AtomicBool) -> anyhow::Result<ModelInfo> {
+    fn train_model(
+        &self,
+        _: &TrainingSpec,
+        _: &AtomicBool,
+        _: &AtomicU64,
+    ) -> anyhow::Result<ModelInfo> {
         self.refuse()
     }
 }

@@ -74,6 +74,11 @@ impl JobControls {
         }
     }
 
+    /// Ids of the jobs running in this process.
+    pub fn running_jobs(&self) -> Vec<i64> {
+        self.lock().keys().copied().collect()
+    }
+
     /// Whether [`Self::shut_down`] was called.
     pub fn is_shutting_down(&self) -> bool {
         self.shutting_down.load(Ordering::SeqCst)

@@ -2,7 +2,8 @@
 //! `ready` with the engine's manifest, or `failed`.
 
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
@@ -33,10 +34,24 @@ pub(super) async fn run(
     }
     let engine = ctx.engine.clone();
     let (spec, task_flag) = (payload.spec.clone(), flag.clone());
-    let trained = spawn_blocking_with_span(move || engine.train_model(&spec, &task_flag))
-        .await
-        .map_err(join_error)
-        .and_then(|r| r);
+    let saved = Arc::new(AtomicU64::new(0));
+    let task_saved = saved.clone();
+    let mut task =
+        spawn_blocking_with_span(move || engine.train_model(&spec, &task_flag, &task_saved));
+    // Saved epochs are the training job's progress: recovery after a killed process
+    // compares them with the progress at the claim to tell a slow job from a stuck one.
+    let mut reported = 0;
+    let mut tick = tokio::time::interval(PROGRESS_INTERVAL);
+    let joined = loop {
+        tokio::select! {
+            joined = &mut task => break joined,
+            _ = tick.tick() => {
+                reported = report_progress(ctx, job.job_id, &saved, reported).await?;
+            }
+        }
+    };
+    report_progress(ctx, job.job_id, &saved, reported).await?;
+    let trained = joined.map_err(join_error).and_then(|r| r);
     match trained {
         Ok(info) => {
             let manifest = serde_json::to_value(&info)?;
@@ -52,6 +67,24 @@ pub(super) async fn run(
             finish(ctx, &payload.model_id, outcome).await
         }
     }
+}
+
+/// How often the saved epochs of a running training are copied to the job row.
+const PROGRESS_INTERVAL: Duration = Duration::from_secs(1);
+
+/// Stores the saved epochs when they changed since `reported`; returns what is stored.
+async fn report_progress(
+    ctx: &JobContext,
+    job_id: i64,
+    saved: &AtomicU64,
+    reported: i64,
+) -> anyhow::Result<i64> {
+    let now = saved.load(Ordering::SeqCst) as i64;
+    if now != reported {
+        let mut conn = ctx.pool.acquire().await?;
+        db::jobs::set_progress(&mut conn, job_id, now).await?;
+    }
+    Ok(now)
 }
 
 /// Marks the model according to a run that did not succeed.

@@ -3,7 +3,7 @@
 //! as a UV sphere. Exact expectations (bounding box, area, mixing) follow from that.
 
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use aortagen::geometry::TriMesh;
@@ -113,7 +113,12 @@ impl CohortEngine for AnalyticEngine {
             .collect())
     }
 
-    fn train_model(&self, spec: &TrainingSpec, _: &AtomicBool) -> anyhow::Result<ModelInfo> {
+    fn train_model(
+        &self,
+        spec: &TrainingSpec,
+        _: &AtomicBool,
+        _: &AtomicU64,
+    ) -> anyhow::Result<ModelInfo> {
         let files = std::fs::read_dir(&spec.input_dir)?.count();
         let mut info = self.model_info(&spec.model_dir)?;
         info.training_shapes.truncate(files);

@@ -26,6 +26,10 @@ pub const MAX_QUEUE: i64 = 3;
 pub const MAX_UPLOAD: usize = 64 * 1024;
 /// JSON body limit in tests.
 pub const MAX_JSON: usize = 16 * 1024;
+/// Most entries of an uploaded zip archive in tests.
+pub const MAX_ARCHIVE_ENTRIES: usize = 8;
+/// Most bytes an uploaded zip archive may expand to in tests.
+pub const MAX_ARCHIVE_BYTES: usize = 256 * 1024;
 
 /// A running test service.
 pub struct TestApp {
@@ -113,6 +117,8 @@ pub async fn spawn_on_configured(
     config.max_queue = MAX_QUEUE;
     config.max_upload_bytes = MAX_UPLOAD;
     config.max_json_bytes = MAX_JSON;
+    config.max_archive_entries = MAX_ARCHIVE_ENTRIES;
+    config.max_archive_bytes = MAX_ARCHIVE_BYTES;
     config.models_dir = dir.path().join("models");
     configure(&mut config);
     let engine = Arc::new(engine);

@@ -201,3 +201,47 @@ async fn shutdown_puts_a_running_job_back_in_the_queue_with_its_shapes() {
     assert_eq!(job_of(&app, id).await["status"], "queued");
     assert_eq!(app.count("shape").await, 1);
 }
+
+/// Recovery after a killed process: interruptions that committed progress never fail a job;
+/// `max_attempts` interruptions in a row without progress do.
+#[tokio::test]
+async fn only_interruptions_without_progress_count_towards_failing_a_job() {
+    use aortagen::db::jobs;
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(20, 2)).await;
+    let job_id = job_of(&app, id).await["id"].as_i64().unwrap();
+    let pool = &app.state.pool;
+    let status = async || {
+        job_of(&app, id).await["status"]
+            .as_str()
+            .unwrap()
+            .to_owned()
+    };
+    // Eight kills, each after one more shape: far more than max_attempts = 2.
+    for done in 1..=8 {
+        let claimed = jobs::claim_next(pool)
+            .await
+            .unwrap()
+            .expect("the job is queued");
+        assert_eq!(claimed.job_id, job_id);
+        let mut conn = pool.acquire().await.unwrap();
+        jobs::set_progress(&mut conn, job_id, done).await.unwrap();
+        drop(conn);
+        assert_eq!(jobs::requeue_interrupted(pool, 2).await.unwrap(), (1, 0));
+        assert_eq!(status().await, "queued");
+    }
+    // Two kills in a row with nothing committed: the job is given up.
+    jobs::claim_next(pool).await.unwrap().expect("queued");
+    assert_eq!(jobs::requeue_interrupted(pool, 2).await.unwrap(), (1, 0));
+    jobs::claim_next(pool).await.unwrap().expect("queued");
+    assert_eq!(jobs::requeue_interrupted(pool, 2).await.unwrap(), (0, 1));
+    let job = job_of(&app, id).await;
+    assert_eq!(job["status"], "failed");
+    assert!(
+        job["error"]
+            .as_str()
+            .unwrap()
+            .contains("2 times in a row without progress"),
+        "{job}"
+    );
+}

@@ -155,3 +155,161 @@ async fn a_bad_upload_is_refused_naming_the_file_and_nothing_is_stored() {
     assert_eq!(app.count("model").await, 1);
     assert_eq!(app.count("job").await, 0);
 }
+
+/// A zip archive of `(name, bytes)` members, deflated, with a directory and macOS metadata
+/// that the service must skip.
+fn zip_of(members: &[(&str, Vec<u8>)]) -> Vec<u8> {
+    use std::io::Write;
+    let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    let options = zip::write::SimpleFileOptions::default()
+        .compression_method(zip::CompressionMethod::Deflated);
+    zip.add_directory("meshes/", options).unwrap();
+    for (name, bytes) in members {
+        zip.start_file(*name, options).unwrap();
+        zip.write_all(bytes).unwrap();
+    }
+    zip.start_file("__MACOSX/meshes/._a.stl", options).unwrap();
+    zip.write_all(b"resource fork").unwrap();
+    zip.finish().unwrap().into_inner()
+}
+
+async fn post_zip(app: &TestApp, query: &str, body: Vec<u8>) -> crate::helpers::TestResponse {
+    let path = format!("/v1/models{query}");
+    app.request(
+        Method::POST,
+        &path,
+        &[("content-type", "application/zip")],
+        body,
+    )
+    .await
+}
+
+#[tokio::test]
+async fn a_zip_archive_of_meshes_trains_a_model() {
+    let app = spawn_app().await;
+    let archive = zip_of(&[
+        ("meshes/a.stl", stl()),
+        ("meshes/b.stl", stl()),
+        ("meshes/c.stl", stl()),
+    ]);
+    let r = post_zip(&app, "?id=zipped&epochs=3", archive.clone()).await;
+    assert_eq!(
+        r.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    assert_eq!(
+        r.json()["shapes"],
+        3,
+        "directory and __MACOSX entries are skipped"
+    );
+    let job = app.get(r.header("location").unwrap()).await.json();
+    assert_eq!(job["progress"]["total"], 3, "the requested epochs");
+    app.run_pending_jobs().await;
+    let m = app.get("/v1/models/zipped").await.json();
+    assert_eq!(
+        (m["status"].as_str(), m["training_shapes"].as_u64()),
+        (Some("ready"), Some(3))
+    );
+
+    // The same archive as one part of a multipart upload, next to a plain file.
+    let parts = [
+        ("id", None, b"zipped-part".to_vec()),
+        ("files", Some("set.zip"), archive),
+        ("files", Some("d.stl"), stl()),
+    ];
+    let r = upload(&app, &parts).await;
+    assert_eq!(
+        r.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    assert_eq!(r.json()["shapes"], 4);
+}
+
+#[tokio::test]
+async fn a_zip_member_that_is_not_a_mesh_is_named_in_a_422() {
+    let app = spawn_app().await;
+    let archive = zip_of(&[
+        ("meshes/a.stl", stl()),
+        ("meshes/broken.obj", b"v 1 2\nf 9 9 9\n".to_vec()),
+    ]);
+    let r = post_zip(&app, "?id=broken", archive).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    let problem = r.json();
+    assert_eq!(
+        problem["field"], "files[upload.zip/meshes/broken.obj]",
+        "{problem}"
+    );
+    assert!(
+        problem["detail"].as_str().unwrap().contains("broken.obj"),
+        "{problem}"
+    );
+    assert_eq!(
+        app.get("/v1/models/broken").await.status,
+        StatusCode::NOT_FOUND
+    );
+}
+
+#[tokio::test]
+async fn bytes_that_are_not_a_zip_are_refused_with_a_reason() {
+    let app = spawn_app().await;
+    let r = post_zip(&app, "", b"this is not an archive".to_vec()).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    let problem = r.json();
+    assert_eq!(problem["field"], "files[upload.zip]");
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("not a readable zip archive"),
+        "{problem}"
+    );
+}
+
+#[tokio::test]
+async fn archives_with_too_many_entries_or_too_many_bytes_are_413() {
+    use crate::helpers::{MAX_ARCHIVE_BYTES, MAX_ARCHIVE_ENTRIES};
+    let app = spawn_app().await;
+    let many: Vec<(String, Vec<u8>)> = (0..MAX_ARCHIVE_ENTRIES)
+        .map(|i| (format!("m{i}.stl"), stl()))
+        .collect();
+    let members: Vec<(&str, Vec<u8>)> = many.iter().map(|(n, b)| (n.as_str(), b.clone())).collect();
+    let r = post_zip(&app, "", zip_of(&members)).await;
+    assert_eq!(
+        r.status,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    assert!(r.json()["detail"].as_str().unwrap().contains("entries"));
+
+    // A bomb: a few kilobytes that expand past the limit.
+    let zeros = vec![b' '; MAX_ARCHIVE_BYTES + 1];
+    let bomb = zip_of(&[("a.obj", zeros)]);
+    assert!(bomb.len() < MAX_UPLOAD, "the archive itself is small");
+    let r = post_zip(&app, "", bomb).await;
+    assert_eq!(
+        r.status,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    assert!(
+        r.json()["detail"]
+            .as_str()
+            .unwrap()
+            .contains("expands to more than")
+    );
+}
+
+#[tokio::test]
+async fn zip_members_whose_path_leaves_the_archive_are_refused() {
+    let app = spawn_app().await;
+    let archive = zip_of(&[("a.stl", stl()), ("../../etc/b.stl", stl())]);
+    let r = post_zip(&app, "", archive).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(r.json()["field"], "files[upload.zip/../../etc/b.stl]");
+}
