@@ -20,7 +20,7 @@ use crate::sdf::backend::Backend;
 use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
 use crate::sdf::evaluation::EvaluationReport;
-use crate::sdf::generate::Mixture;
+use crate::sdf::generate::{Mixture, noisy_latent};
 use crate::sdf::reconstruct::{ExtractionMethod, reconstruct};
 use crate::sdf::store::LoadedModel;
 use crate::sdf::training::{Silent, TrainingRequest, train};
@@ -104,6 +104,14 @@ impl CohortEngine for SdfEngine {
         })
     }
 
+    fn training_latents(&self, model_dir: &Path) -> anyhow::Result<Vec<Vec<f32>>> {
+        let cached = self.model(model_dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        Ok(cached.latents.clone())
+    }
+
     fn generate_shape(
         &self,
         model_dir: &Path,
@@ -126,7 +134,8 @@ impl CohortEngine for SdfEngine {
             weights: spec.weights.clone(),
         };
         let transform = mixture.mix_transforms(&cached.model.manifest.transforms())?;
-        let field = cached.model.field(&mixture.mix_latents(&cached.latents))?;
+        let latent = noisy_latent(&mixture, &cached.latents, spec.latent_noise, spec.seed);
+        let field = cached.model.field(&latent)?;
         let extraction = reconstruct(&field, spec.resolution, self.extraction)?;
         let mesh_unit = extraction.mesh;
         let mesh_mm = transform.mesh_to_mesh_units(&mesh_unit);

@@ -7,7 +7,9 @@ use anyhow::{Context, ensure};
 use super::progress::{init_logging, terminal_bar};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::sdf::backend::Backend;
-use crate::sdf::generate::{MixSpec, Provenance, Weighting, generate_shape, parse_weights};
+use crate::sdf::generate::{
+    Diversity, MixSpec, Provenance, Selection, Weighting, generate_shape_with, parse_weights,
+};
 use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
 use crate::sdf::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
 use crate::sdf::store::LoadedModel;
@@ -37,6 +39,13 @@ pub struct GenerateArgs {
     /// Weights when --weights is absent.
     #[arg(long, value_enum, default_value = "dirichlet")]
     pub weighting: Weighting,
+    /// How the training latents are picked: `uniform`, or `spread` (k-means++ style, far
+    /// from the mean and from each other).
+    #[arg(long, value_enum, default_value = "uniform")]
+    pub selection: Selection,
+    /// Gaussian noise added to the mixed latent, in training standard deviations (≥ 0).
+    #[arg(long, default_value_t = 0.0)]
+    pub latent_noise: f64,
     /// Number of shapes.
     #[arg(long, default_value_t = 1)]
     pub count: u64,
@@ -75,6 +84,14 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&args.resolution),
         "--resolution must be between {MIN_RESOLUTION} and {MAX_RESOLUTION}"
     );
+    ensure!(
+        args.latent_noise.is_finite() && args.latent_noise >= 0.0,
+        "--latent-noise must be a finite number ≥ 0"
+    );
+    let diversity = Diversity {
+        selection: args.selection,
+        latent_noise: args.latent_noise,
+    };
     let weights = match &args.weights {
         Some(text) => Some(parse_weights(text).map_err(|e| anyhow::anyhow!("--weights: {e}"))?),
         None => None,
@@ -96,18 +113,23 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     };
     let bar = terminal_bar(args.count, "shapes");
     for shape in 0..args.count {
-        let generated = generate_shape(
+        let attempt = 0;
+        let generated = generate_shape_with(
             &model,
             &latents,
             &spec,
-            args.seed,
-            shape,
+            diversity,
+            (args.seed, shape, attempt),
             args.resolution,
             args.extraction,
         )
         .with_context(|| format!("shape {shape}"))?;
-        let provenance =
-            Provenance::new(&model, &generated, args.seed, shape, args.resolution, units);
+        let provenance = Provenance {
+            selection: diversity.selection,
+            latent_noise: diversity.latent_noise,
+            attempt,
+            ..Provenance::new(&model, &generated, args.seed, shape, args.resolution, units)
+        };
         let mesh = match args.units {
             Units::Mm => generated.mesh_in_mesh_units(),
             Units::Unit => generated.mesh.clone(),

@@ -61,6 +61,12 @@ pub struct Provenance {
     pub resolution: i64,
     /// aortagen version.
     pub software_version: String,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: f64,
+    /// How the training latents were picked (`uniform` or `spread`).
+    pub selection: String,
+    /// Which draw was kept (0 = the first); `seed` is that draw's seed.
+    pub attempt: i64,
 }
 
 /// A unit-ball transform.
@@ -88,6 +94,9 @@ impl ShapeView {
                 seed: s.seed as u64,
                 resolution: s.resolution,
                 software_version: s.software_version,
+                latent_noise: s.latent_noise,
+                selection: s.selection,
+                attempt: s.attempt,
             },
             vertex_count: s.vertex_count,
             triangle_count: s.triangle_count,

@@ -14,6 +14,7 @@ use super::engine::{GeneratedShape, ModelInfo, ShapeSpec};
 use super::plan::{CohortPlan, Weighting};
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
 use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
+use crate::sdf::generate::Selection;
 use crate::telemetry::spawn_blocking_with_span;
 
 /// The payload of a `cohort` job.
@@ -23,8 +24,13 @@ pub struct CohortPayload {
     pub cohort_id: i64,
 }
 
-/// The plan a stored cohort describes.
-pub fn plan_for(cohort: &CohortRow, info: &ModelInfo) -> anyhow::Result<CohortPlan> {
+/// The plan a stored cohort describes; `latents` are the model's training latents (needed
+/// for spread selection only).
+pub fn plan_for(
+    cohort: &CohortRow,
+    info: &ModelInfo,
+    latents: Option<Arc<Vec<Vec<f32>>>>,
+) -> anyhow::Result<CohortPlan> {
     let weights = match &cohort.weights {
         Some(json) => Some(serde_json::from_str(json).context("stored weights are not JSON")?),
         None => None,
@@ -36,6 +42,9 @@ pub fn plan_for(cohort: &CohortRow, info: &ModelInfo) -> anyhow::Result<CohortPl
         weighting: Weighting::parse(&cohort.weighting).context("stored weighting is unknown")?,
         seed: cohort.seed as u64,
         resolution: cohort.resolution as usize,
+        selection: Selection::parse(&cohort.selection).context("stored selection is unknown")?,
+        latent_noise: cohort.latent_noise,
+        latents,
     })
 }
 
@@ -53,8 +62,25 @@ pub(super) async fn run(
         .await?
         .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
     let info: ModelInfo = serde_json::from_str(&model.manifest).context("bad model manifest")?;
-    let plan = plan_for(&cohort, &info)?;
     let model_dir = PathBuf::from(&model.dir_path);
+    let latents = if cohort.selection == Selection::Spread.as_str() {
+        let engine = ctx.engine.clone();
+        let dir = model_dir.clone();
+        let latents = spawn_blocking_with_span(move || engine.training_latents(&dir))
+            .await
+            .map_err(join_error)?
+            .context("cannot read the training latents")?;
+        anyhow::ensure!(
+            latents.len() == info.training_shape_count(),
+            "the engine returned {} latents for {} training shapes",
+            latents.len(),
+            info.training_shape_count()
+        );
+        Some(Arc::new(latents))
+    } else {
+        None
+    };
+    let plan = plan_for(&cohort, &info, latents)?;
 
     let stored: HashSet<i64> = db::shapes::existing_indices(&ctx.pool, cohort.cohort_id)
         .await?
@@ -147,6 +173,15 @@ async fn commit_shape(
         radius: shape.transform.radius,
         mesh: blob,
         mesh_sha256: sha,
+        latent_noise: spec.latent_noise,
+        selection: &cohort.selection,
+        attempt: 0,
+        redraws: 0,
+        novelty_cd: None,
+        nearest_training_index: None,
+        novelty_met: None,
+        anatomy: None,
+        anatomy_error: None,
     };
     let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
     db::shapes::insert(&mut tx, &row)

@@ -51,6 +51,10 @@ pub struct ShapeSpec {
     pub seed: u64,
     /// Marching-cubes grid resolution per axis.
     pub resolution: usize,
+    /// Gaussian noise added to the mixed latent, in training standard deviations per
+    /// dimension, drawn from `seed` (0 = the plain convex combination).
+    #[serde(default)]
+    pub latent_noise: f64,
 }
 
 /// One generated shape.
@@ -84,6 +88,9 @@ pub trait CohortEngine: Send + Sync + 'static {
     /// Facts about the model stored in `model_dir` (used for validation and the API).
     fn model_info(&self, model_dir: &Path) -> anyhow::Result<ModelInfo>;
 
+    /// The model's training latents, in index order (for spread selection).
+    fn training_latents(&self, model_dir: &Path) -> anyhow::Result<Vec<Vec<f32>>>;
+
     /// Generates one shape. Returns early with an error once `cancel` becomes true.
     fn generate_shape(
         &self,
@@ -113,6 +120,10 @@ impl UnavailableEngine {
 
 impl CohortEngine for UnavailableEngine {
     fn model_info(&self, _: &Path) -> anyhow::Result<ModelInfo> {
+        self.refuse()
+    }
+
+    fn training_latents(&self, _: &Path) -> anyhow::Result<Vec<Vec<f32>>> {
         self.refuse()
     }
 

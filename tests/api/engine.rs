@@ -12,6 +12,7 @@ use aortagen::geometry::normalize::UnitBallTransform;
 use aortagen::jobs::engine::{
     CohortEngine, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo, TrainingSpec,
 };
+use aortagen::sdf::generate::{Mixture, noisy_latent};
 
 /// Number of training ellipsoids.
 pub const TRAINING_SHAPES: usize = 5;
@@ -33,6 +34,13 @@ pub fn mixed_axes(indices: &[usize], weights: &[f64]) -> [f64; 3] {
         }
     }
     axes
+}
+
+/// The latents of the analytic model: the training ellipsoids' semi-axes.
+pub fn training_latents() -> Vec<Vec<f32>> {
+    (0..TRAINING_SHAPES)
+        .map(|i| training_axes(i).iter().map(|&a| a as f32).collect())
+        .collect()
 }
 
 /// The analytic engine, with hooks to hold or break generation at a given call.
@@ -63,6 +71,10 @@ impl CohortEngine for AnalyticEngine {
         })
     }
 
+    fn training_latents(&self, _: &Path) -> anyhow::Result<Vec<Vec<f32>>> {
+        Ok(training_latents())
+    }
+
     fn generate_shape(
         &self,
         _: &Path,
@@ -79,7 +91,16 @@ impl CohortEngine for AnalyticEngine {
             }
         }
         anyhow::ensure!(!cancel.load(Ordering::SeqCst), "generation cancelled");
-        let axes = mixed_axes(&spec.training_indices, &spec.weights);
+        let axes = if spec.latent_noise == 0.0 {
+            mixed_axes(&spec.training_indices, &spec.weights)
+        } else {
+            let mixture = Mixture {
+                indices: spec.training_indices.clone(),
+                weights: spec.weights.clone(),
+            };
+            let z = noisy_latent(&mixture, &training_latents(), spec.latent_noise, spec.seed);
+            [0, 1, 2].map(|d| f64::from(z[d]).max(1.0))
+        };
         let radius = axes.iter().cloned().fold(0.0, f64::max);
         let mut mesh = uv_sphere(8, 16);
         for p in &mut mesh.positions {

@@ -8,4 +8,5 @@ mod helpers;
 mod jobs;
 mod models;
 mod openapi;
+mod science;
 mod shapes;
