@@ -44,6 +44,17 @@ pub struct ShapeView {
     pub conventions: &'static str,
     /// Download URL (add `?format=` and `&units=`).
     pub mesh_url: String,
+    /// Chamfer distance (squared, unit-ball coordinates) to the nearest training shape, as
+    /// reconstructed by the model at this shape's resolution: how far it is from disclosing
+    /// one training patient.
+    pub novelty_cd: Option<f64>,
+    /// Index of that training shape.
+    pub nearest_training_index: Option<i64>,
+    /// Draws rejected for being closer than the cohort's `min_novelty` (at most 10).
+    pub redraws: i64,
+    /// False when no draw reached the cohort's `min_novelty` and the most novel one was
+    /// kept; true otherwise.
+    pub novelty_met: Option<bool>,
 }
 
 /// The model, training shapes, weights, seed and resolution a shape came from.
@@ -109,6 +120,10 @@ impl ShapeView {
             },
             conventions: CONVENTIONS,
             mesh_url: format!("/v1/shapes/{}/mesh", s.shape_id),
+            novelty_cd: s.novelty_cd,
+            nearest_training_index: s.nearest_training_index,
+            redraws: s.redraws,
+            novelty_met: s.novelty_met,
         })
     }
 }

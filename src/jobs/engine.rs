@@ -3,12 +3,14 @@
 //! the whole service on an analytic stand-in.
 
 use std::path::Path;
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::TriMesh;
 use crate::geometry::normalize::UnitBallTransform;
+use crate::sdf::novelty::NoveltyReference;
 
 /// Facts about a registered model, reported by the engine and stored as its manifest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -99,6 +101,16 @@ pub trait CohortEngine: Send + Sync + 'static {
         cancel: &AtomicBool,
     ) -> anyhow::Result<GeneratedShape>;
 
+    /// The model's training surfaces at `resolution` (unit-ball coordinates), sampled and
+    /// indexed to measure generated shapes' novelty against. Built once per model and
+    /// resolution and cached; returns early with an error once `cancel` becomes true.
+    fn novelty_reference(
+        &self,
+        model_dir: &Path,
+        resolution: usize,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<Arc<NoveltyReference>>;
+
     /// Pairwise Chamfer distance matrix (unit-ball coordinates) over a cohort's meshes.
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>>;
 
@@ -133,6 +145,15 @@ impl CohortEngine for UnavailableEngine {
         _: &ShapeSpec,
         _: &AtomicBool,
     ) -> anyhow::Result<GeneratedShape> {
+        self.refuse()
+    }
+
+    fn novelty_reference(
+        &self,
+        _: &Path,
+        _: usize,
+        _: &AtomicBool,
+    ) -> anyhow::Result<Arc<NoveltyReference>> {
         self.refuse()
     }
 

@@ -541,6 +541,15 @@ pub struct Provenance {
     /// training shape).
     #[serde(default)]
     pub attempt: u32,
+    /// Distance to the nearest training shape (the model's reconstruction of it), if measured.
+    #[serde(default)]
+    pub novelty: Option<super::novelty::Novelty>,
+    /// Draws rejected as closer than the requested minimum novelty.
+    #[serde(default)]
+    pub redraws: u32,
+    /// False when no draw reached the requested minimum novelty (the most novel was kept).
+    #[serde(default)]
+    pub novelty_met: Option<bool>,
 }
 
 impl Provenance {
@@ -575,6 +584,9 @@ impl Provenance {
             selection: Selection::Uniform,
             latent_noise: 0.0,
             attempt: 0,
+            novelty: None,
+            redraws: 0,
+            novelty_met: None,
         }
     }
 }
