@@ -12,6 +12,7 @@ use super::AppState;
 use super::cohorts::{load as load_cohort, page};
 use super::error::{ApiError, Problem, Result};
 use super::extract::{ApiQuery, parse_id};
+use crate::anatomy::shape::ShapeAnatomy;
 use crate::db::{self, mesh_blob, shapes::ShapeRow};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::normalize::UnitBallTransform;
@@ -55,6 +56,10 @@ pub struct ShapeView {
     /// False when no draw reached the cohort's `min_novelty` and the most novel one was
     /// kept; true otherwise.
     pub novelty_met: Option<bool>,
+    /// Anatomical measurements in mm (null when they failed; see `anatomy_error`).
+    pub anatomy: Option<ShapeAnatomy>,
+    /// Why the shape could not be measured as an aortic root nor as a vessel.
+    pub anatomy_error: Option<String>,
 }
 
 /// The model, training shapes, weights, seed and resolution a shape came from.
@@ -124,6 +129,8 @@ impl ShapeView {
             nearest_training_index: s.nearest_training_index,
             redraws: s.redraws,
             novelty_met: s.novelty_met,
+            anatomy: s.anatomy.as_deref().map(parse_json).transpose()?,
+            anatomy_error: s.anatomy_error,
         })
     }
 }

@@ -13,6 +13,7 @@ use sha2::{Digest, Sha256};
 use super::engine::{GeneratedShape, ModelInfo, ShapeSpec};
 use super::plan::{CohortPlan, Weighting};
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
+use crate::anatomy::shape::measure_shape;
 use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
 use crate::sdf::generate::MAX_REDRAWS;
 use crate::sdf::generate::Selection;
@@ -184,11 +185,13 @@ struct Candidate {
     attempt: u32,
 }
 
-/// The kept draw, encoded for storage.
+/// The kept draw, encoded for storage and measured.
 struct Finished {
     candidate: Candidate,
     blob: Vec<u8>,
     sha: String,
+    /// Measurements as JSON, or why they failed.
+    anatomy: Result<String, String>,
 }
 
 /// How the kept draw was reached.
@@ -245,15 +248,22 @@ async fn generate(
     .map_err(join_error)?
 }
 
-/// Encodes the kept draw, off the executor.
+/// Encodes the kept draw and measures its anatomy in mm, off the executor.
 async fn finish(candidate: Candidate) -> anyhow::Result<Finished> {
     spawn_blocking_with_span(move || {
         let blob = mesh_blob::encode(&candidate.shape.mesh_unit);
         let sha = hex(&Sha256::digest(&blob));
+        let shape = &candidate.shape;
+        let mesh_mm = shape.transform.mesh_to_mesh_units(&shape.mesh_unit);
+        let anatomy = match measure_shape(&mesh_mm) {
+            Ok(a) => Ok(serde_json::to_string(&a)?),
+            Err(e) => Err(e.to_string()),
+        };
         Ok(Finished {
             candidate,
             blob,
             sha,
+            anatomy,
         })
     })
     .await
@@ -299,8 +309,8 @@ async fn commit_shape(
         novelty_cd: Some(novelty.chamfer),
         nearest_training_index: Some(novelty.nearest as i64),
         novelty_met: Some(outcome.novelty_met),
-        anatomy: None,
-        anatomy_error: None,
+        anatomy: finished.anatomy.as_deref().ok(),
+        anatomy_error: finished.anatomy.as_ref().err().map(String::as_str),
     };
     let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
     db::shapes::insert(&mut tx, &row)

@@ -228,3 +228,66 @@ async fn the_most_novel_draw_is_the_one_kept() {
         "{kept} vs {first}"
     );
 }
+
+#[tokio::test]
+async fn every_shape_carries_its_anatomy_or_the_reason_and_the_metrics_summarise_it() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(4, 2)).await;
+    app.run_pending_jobs().await;
+    let mut lengths = Vec::new();
+    let mut annuli = Vec::new();
+    let mut failed = 0;
+    for s in shapes(&app, id).await {
+        match (&s["anatomy"], &s["anatomy_error"]) {
+            (Value::Object(a), Value::Null) => {
+                let length = a["length_mm"].as_f64().unwrap();
+                // The analytic shapes are ellipsoids: measured along their long axis (mm).
+                let long_axis = 2.0 * s["transform"]["radius"].as_f64().unwrap();
+                assert!(length > 0.0 && length <= long_axis * 1.01, "{s}");
+                lengths.push(length);
+                match a["method"].as_str() {
+                    Some("root") => annuli.push(a["annulus_mm"].as_f64().unwrap()),
+                    Some("vessel") => assert!(a["annulus_mm"].is_null(), "{s}"),
+                    _ => panic!("unknown method: {s}"),
+                }
+            }
+            (Value::Null, Value::String(reason)) => {
+                assert!(!reason.is_empty());
+                failed += 1;
+            }
+            other => panic!("anatomy and its error must be exclusive: {other:?}"),
+        }
+    }
+    let m = app.get(&format!("/v1/cohorts/{id}/metrics")).await.json();
+    let anatomy = &m["anatomy"];
+    assert_eq!(
+        anatomy["measured"].as_i64(),
+        Some(lengths.len() as i64),
+        "{anatomy}"
+    );
+    assert_eq!(anatomy["failed"].as_i64(), Some(failed), "{anatomy}");
+    assert_eq!(
+        anatomy["roots"].as_u64(),
+        Some(annuli.len() as u64),
+        "{anatomy}"
+    );
+    for key in ["annulus_mm", "sinus_mm", "stj_mm", "sinus_height_mm"] {
+        match annuli.len() {
+            0 => assert!(anatomy[key].is_null(), "{key}: {anatomy}"),
+            n => assert_eq!(anatomy[key]["count"].as_u64(), Some(n as u64), "{key}"),
+        }
+    }
+    if let Some(min) = annuli.iter().cloned().reduce(f64::min) {
+        assert_eq!(anatomy["annulus_mm"]["min"].as_f64(), Some(min));
+    }
+    if lengths.is_empty() {
+        assert!(anatomy["length_mm"].is_null());
+    } else {
+        let mean = lengths.iter().sum::<f64>() / lengths.len() as f64;
+        assert_eq!(
+            anatomy["length_mm"]["count"].as_u64(),
+            Some(lengths.len() as u64)
+        );
+        assert!((anatomy["length_mm"]["mean"].as_f64().unwrap() - mean).abs() < 1e-9 * mean);
+    }
+}

@@ -9,6 +9,7 @@ use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
+use crate::anatomy::shape::ShapeAnatomy;
 use crate::db;
 use crate::http::AppState;
 use crate::http::error::{ApiError, Problem, Result};
@@ -43,6 +44,30 @@ pub struct CohortMetrics {
     pub computed_at: String,
     /// Distances of the shapes to their nearest training shapes.
     pub novelty: NoveltyMetrics,
+    /// Anatomical measurements over the shapes (mm).
+    pub anatomy: AnatomyMetrics,
+}
+
+/// Per-measurement statistics over a cohort's measured shapes, in mm; a summary is null
+/// when no shape has that measurement (the root landmarks need a root-shaped surface).
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct AnatomyMetrics {
+    /// Shapes measured (as a root or a vessel).
+    pub measured: i64,
+    /// Shapes measured with the aortic-root landmarks.
+    pub roots: i64,
+    /// Shapes that could not be measured.
+    pub failed: i64,
+    /// Annulus diameter (mean of major and minor).
+    pub annulus_mm: Option<ValueSummary>,
+    /// Sinus of Valsalva diameter.
+    pub sinus_mm: Option<ValueSummary>,
+    /// Sinotubular junction diameter.
+    pub stj_mm: Option<ValueSummary>,
+    /// Sinus height.
+    pub sinus_height_mm: Option<ValueSummary>,
+    /// Centreline length.
+    pub length_mm: Option<ValueSummary>,
 }
 
 /// Novelty of a cohort's shapes against the model's training shapes.
@@ -129,6 +154,7 @@ pub(super) async fn get_cohort_metrics(
         matrix: with_matrix.then_some(matrix),
         computed_at: row.created_at,
         novelty,
+        anatomy: anatomy_metrics(&science).map_err(anyhow::Error::from)?,
     })
     .into_response())
 }
@@ -157,6 +183,27 @@ fn novelty_metrics(
             .count() as i64,
         nearest_training_counts: counts,
     }
+}
+
+fn anatomy_metrics(shapes: &[db::shapes::ScienceRow]) -> serde_json::Result<AnatomyMetrics> {
+    let measured: Vec<ShapeAnatomy> = shapes
+        .iter()
+        .filter_map(|s| s.anatomy.as_deref())
+        .map(serde_json::from_str)
+        .collect::<serde_json::Result<_>>()?;
+    let summary = |f: fn(&ShapeAnatomy) -> Option<f64>| {
+        summarize_values(measured.iter().filter_map(f).collect())
+    };
+    Ok(AnatomyMetrics {
+        measured: measured.len() as i64,
+        roots: measured.iter().filter(|a| a.method == "root").count() as i64,
+        failed: (shapes.len() - measured.len()) as i64,
+        annulus_mm: summary(|a| a.annulus_mm),
+        sinus_mm: summary(|a| a.sinus_mm),
+        stj_mm: summary(|a| a.stj_mm),
+        sinus_height_mm: summary(|a| a.sinus_height_mm),
+        length_mm: summary(|a| Some(a.length_mm)),
+    })
 }
 
 fn pairs_csv(ids: &[i64], m: &[Vec<f64>]) -> String {
