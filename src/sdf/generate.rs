@@ -655,8 +655,8 @@ mod tests {
         let m = mixture();
         let base = m.mix_latents(&latents);
         let (scale, draws) = (0.5, 4000);
-        let mut sum = vec![0.0f64; 4];
-        let mut sum_sq = vec![0.0f64; 4];
+        let mut sum = [0.0f64; 4];
+        let mut sum_sq = [0.0f64; 4];
         for seed in 0..draws {
             let z = noisy_latent(&m, &latents, scale, seed);
             assert_eq!(z, noisy_latent(&m, &latents, scale, seed), "deterministic");
