@@ -1,7 +1,35 @@
 //! Service configuration: every setting is a flag with an `AORTAGEN_*` environment variable
 //! and a default, so `aortagen serve` runs with none and containers configure by env.
 
+use std::fmt;
 use std::path::PathBuf;
+use std::str::FromStr;
+
+/// An API key as configured. Its `Debug` is redacted so a logged or printed configuration
+/// never shows it.
+#[derive(Clone, PartialEq, Eq)]
+pub struct ApiKey(String);
+
+impl ApiKey {
+    /// The key text.
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for ApiKey {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("ApiKey(<redacted>)")
+    }
+}
+
+impl FromStr for ApiKey {
+    type Err = std::convert::Infallible;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ok(Self(s.trim().to_owned()))
+    }
+}
 
 /// Settings of `aortagen serve`.
 #[derive(Debug, Clone, clap::Args)]
@@ -34,6 +62,40 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_MAX_UPLOAD_BYTES", default_value_t = 256 * 1024 * 1024)]
     pub max_upload_bytes: usize,
 
+    /// Largest accepted JSON request body in bytes; larger ones get 413.
+    #[arg(long, env = "AORTAGEN_MAX_JSON_BYTES", default_value_t = 1024 * 1024)]
+    pub max_json_bytes: usize,
+
+    /// Largest work of one cohort, `count × resolution³` voxels; larger requests get 422.
+    #[arg(
+        long,
+        env = "AORTAGEN_MAX_COHORT_VOXELS",
+        default_value_t = 2_000_000_000
+    )]
+    pub max_cohort_voxels: u64,
+
+    /// Requests handled at once; further ones get 503 with Retry-After (probes excepted).
+    #[arg(long, env = "AORTAGEN_MAX_IN_FLIGHT", default_value_t = 512)]
+    pub max_in_flight: usize,
+
+    /// API keys (comma-separated). When any key is configured, state-changing requests
+    /// need `Authorization: Bearer <key>`.
+    #[arg(
+        long = "api-keys",
+        env = "AORTAGEN_API_KEYS",
+        value_delimiter = ',',
+        hide_env_values = true
+    )]
+    pub api_keys: Vec<ApiKey>,
+
+    /// File of API keys, one per line; blank lines and `#` comments are ignored.
+    #[arg(long, env = "AORTAGEN_API_KEYS_FILE")]
+    pub api_keys_file: Option<PathBuf>,
+
+    /// Require an API key for reads too (health, readiness and metrics stay public).
+    #[arg(long, env = "AORTAGEN_PROTECT_READS", default_value_t = false)]
+    pub protect_reads: bool,
+
     /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to it.
     #[arg(long, env = "AORTAGEN_MODELS_DIR", default_value = "models")]
     pub models_dir: PathBuf,
@@ -41,6 +103,11 @@ pub struct Config {
     /// Seconds a request may take before it is answered 408.
     #[arg(long, env = "AORTAGEN_REQUEST_TIMEOUT_SECS", default_value_t = 30)]
     pub request_timeout_secs: u64,
+
+    /// Seconds a multipart upload (`POST /v1/models`) may take before it is answered 408;
+    /// longer than the request timeout so a large upload on a slow link completes.
+    #[arg(long, env = "AORTAGEN_UPLOAD_TIMEOUT_SECS", default_value_t = 600)]
+    pub upload_timeout_secs: u64,
 
     /// Seconds clients are told to wait when the queue is full (Retry-After).
     #[arg(long, env = "AORTAGEN_RETRY_AFTER_SECS", default_value_t = 30)]
@@ -55,14 +122,15 @@ pub struct Config {
     pub log_json: bool,
 }
 
+#[derive(clap::Parser)]
+struct Wrapper {
+    #[command(flatten)]
+    config: Config,
+}
+
 impl Config {
     /// Defaults with a different database and bind address (tests, embedding).
     pub fn with_database(database_url: impl Into<String>, bind: impl Into<String>) -> Self {
-        #[derive(clap::Parser)]
-        struct Wrapper {
-            #[command(flatten)]
-            config: Config,
-        }
         let mut config = <Wrapper as clap::Parser>::parse_from(["aortagen"]).config;
         config.database_url = database_url.into();
         config.bind = bind.into();
@@ -74,5 +142,32 @@ impl Config {
         self.workers
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
             .max(1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn api_keys_are_a_comma_separated_list_and_debug_hides_them() {
+        let args = ["aortagen", "--api-keys", "alpha, beta", "--protect-reads"];
+        let config = <Wrapper as clap::Parser>::parse_from(args).config;
+        let keys: Vec<&str> = config.api_keys.iter().map(ApiKey::expose).collect();
+        assert_eq!(keys, ["alpha", "beta"]);
+        assert!(config.protect_reads);
+        let shown = format!("{config:?}");
+        assert!(
+            !shown.contains("alpha") && !shown.contains("beta"),
+            "{shown}"
+        );
+    }
+
+    #[test]
+    fn default_limits_allow_100_shapes_at_256() {
+        let config = Config::with_database("sqlite::memory:", "127.0.0.1:0");
+        assert!(100 * 256u64.pow(3) <= config.max_cohort_voxels);
+        assert_eq!(config.max_json_bytes, 1024 * 1024);
+        assert_eq!(config.max_in_flight, 512);
     }
 }

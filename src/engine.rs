@@ -219,9 +219,14 @@ impl CohortEngine for SdfEngine {
 
 /// Per-shape reconstruction CDs from the model's `evaluation.json`, if it has one.
 fn read_reconstruction_cds(model_dir: &Path) -> Vec<Option<f64>> {
-    std::fs::read(model_dir.join(EVALUATION_FILE))
-        .ok()
-        .and_then(|bytes| serde_json::from_slice::<EvaluationReport>(&bytes).ok())
+    read_evaluation(model_dir)
         .map(|report| report.shapes.iter().map(|s| s.chamfer).collect())
         .unwrap_or_default()
+}
+
+/// The model's stored evaluation (`aortagen evaluate --json MODEL_DIR/evaluation.json`),
+/// if it has a readable one.
+pub fn read_evaluation(model_dir: &Path) -> Option<EvaluationReport> {
+    let bytes = std::fs::read(model_dir.join(EVALUATION_FILE)).ok()?;
+    serde_json::from_slice(&bytes).ok()
 }

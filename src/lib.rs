@@ -15,6 +15,7 @@ pub mod geometry;
 pub mod http;
 pub mod jobs;
 pub mod render;
+pub mod report;
 pub mod sdf;
 pub mod startup;
 pub mod synth;

@@ -12,6 +12,7 @@ use tokio::sync::{Notify, watch};
 
 use crate::config::Config;
 use crate::db;
+use crate::http::access::AccessPolicy;
 use crate::http::{self, AppState};
 use crate::jobs::engine::CohortEngine;
 use crate::jobs::{JobContext, JobControls, worker};
@@ -31,10 +32,19 @@ impl Application {
     /// Prepares everything that can fail before serving: database, recovery, model
     /// registration, listener.
     pub async fn build(config: Config, engine: Arc<dyn CohortEngine>) -> anyhow::Result<Self> {
+        let access = AccessPolicy::from_config(&config)?;
+        if access.is_enabled() {
+            tracing::info!(
+                protect_reads = config.protect_reads,
+                "API keys required for state-changing requests"
+            );
+        }
         let workers = config.worker_count();
         // Workers hold a connection only while committing; requests need a few more.
         let connections = (2 * workers + 8) as u32;
-        let pool = db::connect(&config.database_url, connections).await?;
+        let read_only_switch = db::ReadOnlySwitch::default();
+        let pool =
+            db::connect_with_switch(&config.database_url, connections, &read_only_switch).await?;
         let (requeued, failed) = db::jobs::requeue_interrupted(&pool, config.max_attempts).await?;
         if requeued + failed > 0 {
             tracing::warn!(
@@ -71,6 +81,8 @@ impl Application {
             config: Arc::new(config),
             jobs,
             job_wake: Arc::new(Notify::new()),
+            access: Arc::new(access),
+            read_only_switch,
         };
         Ok(Self {
             listener,

@@ -8,6 +8,7 @@ pub mod measure;
 pub mod mesh;
 pub mod progress;
 pub mod render;
+pub mod report;
 pub mod serve;
 pub mod synth;
 pub mod train;
@@ -40,6 +41,8 @@ pub enum Command {
     Serve(serve::ServeArgs),
     /// Measure a vessel surface: centreline length, diameter profile, root landmarks.
     Measure(measure::MeasureArgs),
+    /// Write an HTML report with SVG plots of a model or a directory of meshes.
+    Report(report::ReportArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -54,5 +57,6 @@ pub fn run() -> anyhow::Result<()> {
         Command::Mesh(args) => mesh::run(args),
         Command::Serve(args) => serve::run(args),
         Command::Measure(args) => measure::run(args),
+        Command::Report(args) => report::run(args),
     }
 }

@@ -75,12 +75,53 @@ pub enum ApiError {
     /// A dependency is down (503).
     #[error("{0}")]
     Unavailable(String),
+    /// The database or disk cannot take writes right now (503); reads may still work.
+    #[error("storage unavailable: {0}")]
+    StorageUnavailable(crate::db::StorageFault),
+    /// Too many requests in flight (503 + Retry-After).
+    #[error("the service is handling too many requests; retry in {retry_after} s")]
+    Overloaded {
+        /// Seconds to wait.
+        retry_after: u64,
+    },
+    /// The request took longer than allowed (408).
+    #[error("the request did not complete within {seconds} s")]
+    Timeout {
+        /// The limit.
+        seconds: u64,
+    },
+    /// No usable credential for a protected request (401 + `WWW-Authenticate: Bearer`).
+    #[error("this request needs an API key: send `Authorization: Bearer <key>`")]
+    Unauthorized,
+    /// A credential that is not a configured API key (403).
+    #[error("the API key is not valid")]
+    Forbidden,
     /// The database failed (500).
     #[error("database error")]
-    Database(#[from] sqlx::Error),
+    Database(sqlx::Error),
     /// Anything else unexpected (500).
     #[error("internal error")]
-    Internal(#[from] anyhow::Error),
+    Internal(anyhow::Error),
+}
+
+/// Storage faults (read-only database, full disk) become 503; other database errors 500.
+impl From<sqlx::Error> for ApiError {
+    fn from(e: sqlx::Error) -> Self {
+        match crate::db::storage_fault(&e) {
+            Some(fault) => Self::StorageUnavailable(fault),
+            None => Self::Database(e),
+        }
+    }
+}
+
+/// As for database errors, a storage fault anywhere in the chain becomes 503.
+impl From<anyhow::Error> for ApiError {
+    fn from(e: anyhow::Error) -> Self {
+        match crate::db::storage_fault_in(&e) {
+            Some(fault) => Self::StorageUnavailable(fault),
+            None => Self::Internal(e),
+        }
+    }
 }
 
 /// An RFC 9457 problem document, extended with the offending field and rule.
@@ -141,7 +182,12 @@ impl ApiError {
             Self::PayloadTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             Self::Conflict(_) => StatusCode::CONFLICT,
             Self::QueueFull { .. } => StatusCode::TOO_MANY_REQUESTS,
-            Self::Unavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
+            Self::Unavailable(_) | Self::StorageUnavailable(_) | Self::Overloaded { .. } => {
+                StatusCode::SERVICE_UNAVAILABLE
+            }
+            Self::Timeout { .. } => StatusCode::REQUEST_TIMEOUT,
+            Self::Unauthorized => StatusCode::UNAUTHORIZED,
+            Self::Forbidden => StatusCode::FORBIDDEN,
             Self::Database(_) | Self::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -157,6 +203,11 @@ impl ApiError {
             Self::Conflict(_) => "conflict",
             Self::QueueFull { .. } => "queue-full",
             Self::Unavailable(_) => "unavailable",
+            Self::StorageUnavailable(_) => "storage-unavailable",
+            Self::Overloaded { .. } => "overloaded",
+            Self::Timeout { .. } => "timeout",
+            Self::Unauthorized => "unauthorized",
+            Self::Forbidden => "forbidden",
             Self::Database(_) | Self::Internal(_) => "internal-error",
         }
     }
@@ -191,13 +242,13 @@ impl ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        if self.status_code().is_server_error() {
-            let cause = match &self {
-                Self::Database(e) => format!("{e}"),
-                Self::Internal(e) => format!("{e:#}"),
-                _ => self.to_string(),
-            };
-            tracing::error!(error = %cause, "request failed");
+        match &self {
+            Self::Database(e) => tracing::error!(error = %e, "request failed"),
+            Self::Internal(e) => tracing::error!(error = format!("{e:#}"), "request failed"),
+            Self::Unavailable(_) | Self::StorageUnavailable(_) => {
+                tracing::warn!(error = %self, "request refused")
+            }
+            _ => {}
         }
         let body = serde_json::to_vec(&self.to_problem()).expect("problems serialise");
         let mut response = (self.status_code(), body).into_response();
@@ -206,8 +257,14 @@ impl IntoResponse for ApiError {
             header::CONTENT_TYPE,
             HeaderValue::from_static("application/problem+json"),
         );
-        if let Self::QueueFull { retry_after, .. } = self {
-            headers.insert(header::RETRY_AFTER, HeaderValue::from(retry_after));
+        match self {
+            Self::QueueFull { retry_after, .. } | Self::Overloaded { retry_after } => {
+                headers.insert(header::RETRY_AFTER, HeaderValue::from(retry_after));
+            }
+            Self::Unauthorized => {
+                headers.insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+            }
+            _ => {}
         }
         response
     }

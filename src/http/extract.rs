@@ -2,9 +2,8 @@
 //! large, 400 malformed with line/column, 422 naming the field), query strings (400) and
 //! numeric path ids (404 when not a number, since such an id cannot exist).
 
-use axum::body::Bytes;
 use axum::extract::{FromRequest, FromRequestParts, Query, Request};
-use axum::http::{StatusCode, header, request::Parts};
+use axum::http::{header, request::Parts};
 use serde::de::DeserializeOwned;
 
 use super::error::ApiError;
@@ -20,7 +19,7 @@ where
 {
     type Rejection = ApiError;
 
-    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+    async fn from_request(req: Request, _state: &S) -> Result<Self, Self::Rejection> {
         let content_type = req
             .headers()
             .get(header::CONTENT_TYPE)
@@ -31,27 +30,39 @@ where
                 got: content_type.unwrap_or_else(|| "no Content-Type".into()),
             });
         }
-        let limit = body_limit(&req);
-        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
-            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                ApiError::PayloadTooLarge { limit }
-            } else {
-                ApiError::BadRequest {
-                    field: None,
-                    message: e.body_text(),
+        let limit = req
+            .extensions()
+            .get::<JsonBodyLimit>()
+            .map_or(usize::MAX, |l| l.0);
+        let bytes = axum::body::to_bytes(req.into_body(), limit)
+            .await
+            .map_err(|e| {
+                if is_length_limit(&e) {
+                    ApiError::PayloadTooLarge { limit }
+                } else {
+                    ApiError::BadRequest {
+                        field: None,
+                        message: format!("cannot read the request body: {e}"),
+                    }
                 }
-            }
-        })?;
+            })?;
         parse_json(&bytes).map(ApiJson)
     }
 }
 
-/// The body limit the router announced through a request extension (for messages).
+/// The JSON body limit, announced by the router through a request extension.
 #[derive(Debug, Clone, Copy)]
-pub struct BodyLimit(pub usize);
+pub struct JsonBodyLimit(pub usize);
 
-fn body_limit(req: &Request) -> usize {
-    req.extensions().get::<BodyLimit>().map_or(0, |l| l.0)
+fn is_length_limit(err: &axum::Error) -> bool {
+    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(err);
+    while let Some(e) = cause {
+        if e.is::<http_body_util::LengthLimitError>() {
+            return true;
+        }
+        cause = e.source();
+    }
+    false
 }
 
 fn is_json(content_type: &str) -> bool {

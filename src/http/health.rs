@@ -28,7 +28,8 @@ async fn get_healthz() -> Json<HealthStatus> {
     Json(HealthStatus { status: "ok" })
 }
 
-/// Readiness: the database answers and the process is not shutting down.
+/// Readiness: the database takes a write (a one-row probe) and the process is not shutting
+/// down. A read-only database or a full disk makes the service not ready until it clears.
 #[utoipa::path(get, path = "/readyz", tag = "operations",
     responses((status = 200, body = HealthStatus),
               (status = 503, body = super::error::Problem, content_type = "application/problem+json")))]
@@ -36,9 +37,12 @@ async fn get_readyz(State(state): State<AppState>) -> Result<Json<HealthStatus>>
     if state.jobs.controls.is_shutting_down() {
         return Err(ApiError::Unavailable("the service is shutting down".into()));
     }
-    sqlx::query("select 1")
-        .execute(&state.pool)
-        .await
-        .map_err(|e| ApiError::Unavailable(format!("the database does not answer: {e}")))?;
+    if let Err(e) = crate::db::probe_write(&state.pool).await {
+        let reason = match crate::db::storage_fault(&e) {
+            Some(fault) => format!("storage unavailable: {fault}"),
+            None => format!("the database does not answer: {e}"),
+        };
+        return Err(ApiError::Unavailable(reason));
+    }
     Ok(Json(HealthStatus { status: "ok" }))
 }

@@ -1,35 +1,40 @@
 //! The HTTP edge: application state, the router (one sub-router per resource), request
 //! tracing and latency metrics. Only this module knows HTTP.
 
+pub mod access;
 pub mod cohorts;
 pub mod error;
 pub mod extract;
 pub mod health;
 pub mod jobs;
+pub mod limits;
 pub mod metrics;
 pub mod model_upload;
 pub mod models;
 pub mod openapi;
+pub mod reports;
 pub mod shapes;
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use axum::extract::{DefaultBodyLimit, MatchedPath, Request, State};
-use axum::http::{StatusCode, Uri};
+use axum::http::Uri;
 use axum::middleware::{self, Next};
 use axum::response::Response;
 use axum::{Extension, Router};
 use sqlx::SqlitePool;
 use tokio::sync::Notify;
-use tower_http::timeout::TimeoutLayer;
 use tower_http::trace::TraceLayer;
 use utoipa_axum::router::OpenApiRouter;
 
 use crate::config::Config;
+use crate::db::ReadOnlySwitch;
 use crate::jobs::JobContext;
+use access::AccessPolicy;
 use error::ApiError;
-use extract::BodyLimit;
+use extract::JsonBodyLimit;
+use limits::Limits;
 
 /// Everything handlers share; cheap to clone.
 #[derive(Clone)]
@@ -42,6 +47,10 @@ pub struct AppState {
     pub jobs: JobContext,
     /// Wakes an idle worker when a job is enqueued.
     pub job_wake: Arc<Notify>,
+    /// API keys and what they protect.
+    pub access: Arc<AccessPolicy>,
+    /// Fault injection: makes the database refuse writes (tests of storage faults).
+    pub read_only_switch: ReadOnlySwitch,
 }
 
 /// Every documented route, with its OpenAPI description.
@@ -54,22 +63,33 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(cohorts::router())
         .merge(shapes::router())
         .merge(jobs::router())
+        .merge(reports::router())
 }
 
-/// The complete application: routes, fallbacks, limits, tracing and metrics.
+/// The complete application: routes, fallbacks, limits, access control, tracing and
+/// metrics. From the outside in: tracing, metrics (so refused and timed-out requests are
+/// counted), the in-flight bound, the deadline, the key check, body limits, the handler.
 pub fn router(state: AppState) -> Router {
     let (routes, _) = api_router().split_for_parts();
     let limit = state.config.max_upload_bytes;
-    let timeout = Duration::from_secs(state.config.request_timeout_secs);
+    let limits = Limits::from_config(&state.config);
     routes
         .fallback(|uri: Uri| async move { ApiError::not_found("route", uri.path()) })
-        .layer(middleware::from_fn_with_state(state.clone(), track_metrics))
         .layer(DefaultBodyLimit::max(limit))
-        .layer(Extension(BodyLimit(limit)))
-        .layer(TimeoutLayer::with_status_code(
-            StatusCode::REQUEST_TIMEOUT,
-            timeout,
+        .layer(Extension(JsonBodyLimit(state.config.max_json_bytes)))
+        .layer(middleware::from_fn_with_state(
+            state.access.clone(),
+            access::require_key,
         ))
+        .layer(middleware::from_fn_with_state(
+            limits.clone(),
+            limits::deadline,
+        ))
+        .layer(middleware::from_fn_with_state(
+            limits,
+            limits::bound_in_flight,
+        ))
+        .layer(middleware::from_fn_with_state(state.clone(), track_metrics))
         .layer(TraceLayer::new_for_http().make_span_with(|req: &Request| {
             let route = req
                 .extensions()

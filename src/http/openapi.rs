@@ -5,7 +5,9 @@ use std::sync::OnceLock;
 
 use axum::Json;
 use axum::response::Html;
-use utoipa::OpenApi;
+use utoipa::openapi::security::{Http, HttpAuthScheme, SecurityRequirement, SecurityScheme};
+use utoipa::openapi::{ContentBuilder, Ref, ResponseBuilder};
+use utoipa::{Modify, OpenApi};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
@@ -25,6 +27,7 @@ use super::AppState;
         (name = "shapes", description = "Generated shapes and their meshes"),
         (name = "models", description = "Registered generative models"),
         (name = "jobs", description = "Background work"),
+        (name = "reports", description = "Plots (SVG) and self-contained HTML reports of models and cohorts"),
         (name = "operations", description = "Health, metrics and documentation"),
     )
 )]
@@ -40,7 +43,83 @@ pub fn base_document() -> utoipa::openapi::OpenApi {
 /// The full generated document.
 pub fn document() -> &'static utoipa::openapi::OpenApi {
     static DOC: OnceLock<utoipa::openapi::OpenApi> = OnceLock::new();
-    DOC.get_or_init(|| super::api_router().split_for_parts().1)
+    DOC.get_or_init(|| {
+        let mut doc = super::api_router().split_for_parts().1;
+        AccessDocs.modify(&mut doc);
+        doc
+    })
+}
+
+/// Documents the API-key scheme and the answers every route may give besides its own:
+/// state-changing operations need `bearerAuth` when keys are configured, reads only when
+/// reads are protected; the probes and metrics are public.
+struct AccessDocs;
+
+impl Modify for AccessDocs {
+    fn modify(&self, doc: &mut utoipa::openapi::OpenApi) {
+        let mut scheme = Http::new(HttpAuthScheme::Bearer);
+        scheme.description = Some(
+            "An API key configured with AORTAGEN_API_KEYS or AORTAGEN_API_KEYS_FILE. Needed for \
+             POST, PUT, PATCH and DELETE once any key is configured, and for reads too with \
+             AORTAGEN_PROTECT_READS=true."
+                .into(),
+        );
+        doc.components
+            .get_or_insert_with(Default::default)
+            .add_security_scheme("bearerAuth", SecurityScheme::Http(scheme));
+        let problem = |description: &str| {
+            let content = ContentBuilder::new()
+                .schema(Some(Ref::from_schema_name("Problem")))
+                .build();
+            ResponseBuilder::new()
+                .description(description)
+                .content("application/problem+json", content)
+                .build()
+        };
+        for (path, item) in doc.paths.paths.iter_mut() {
+            if super::access::PUBLIC_PATHS.contains(&path.as_str()) {
+                continue;
+            }
+            let reads = [&mut item.get, &mut item.head, &mut item.options];
+            for op in reads.into_iter().flatten() {
+                op.security = Some(vec![
+                    SecurityRequirement::default(),
+                    SecurityRequirement::new("bearerAuth", Vec::<String>::new()),
+                ]);
+                let r = &mut op.responses.responses;
+                let unauthorized = problem("No API key, when reads are protected");
+                r.entry("401".into()).or_insert(unauthorized.into());
+                let forbidden = problem("Not a valid API key, when reads are protected");
+                r.entry("403".into()).or_insert(forbidden.into());
+                let busy = problem("Too many requests in flight (see Retry-After)");
+                r.entry("503".into()).or_insert(busy.into());
+            }
+            let writes = [
+                &mut item.post,
+                &mut item.put,
+                &mut item.patch,
+                &mut item.delete,
+            ];
+            for op in writes.into_iter().flatten() {
+                op.security = Some(vec![SecurityRequirement::new(
+                    "bearerAuth",
+                    Vec::<String>::new(),
+                )]);
+                let r = &mut op.responses.responses;
+                let unauthorized = problem("No API key (when keys are configured)");
+                r.entry("401".into()).or_insert(unauthorized.into());
+                let forbidden = problem("Not a valid API key");
+                r.entry("403".into()).or_insert(forbidden.into());
+                let timeout = problem("The request took longer than the configured timeout");
+                r.entry("408".into()).or_insert(timeout.into());
+                let unavailable = problem(
+                    "Too many requests in flight (see Retry-After), or storage cannot take \
+                     writes (read-only database, full disk)",
+                );
+                r.entry("503".into()).or_insert(unavailable.into());
+            }
+        }
+    }
 }
 
 /// The document as committed in `openapi/openapi.json` (pretty, trailing newline).

@@ -172,6 +172,9 @@ pub(super) async fn run(
         .await?
         .is_some();
     if !has_metrics && let Err(e) = compute_metrics(ctx, &cohort).await {
+        if db::storage_fault_in(&e).is_some() {
+            return Err(e.context("cannot store the pairwise metrics"));
+        }
         return Ok(RunOutcome::Failed(format!("pairwise metrics: {e:#}")));
     }
     Ok(RunOutcome::Succeeded)

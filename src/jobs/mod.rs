@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::anyhow;
 use sqlx::SqlitePool;
@@ -95,6 +95,9 @@ pub enum RunOutcome {
     Released,
     /// Gave up; the message is the error chain.
     Failed(String),
+    /// Storage could not take a write (read-only database, full disk); back in the queue
+    /// with finished work kept, to run again once storage recovers.
+    StorageFault(String),
 }
 
 impl RunOutcome {
@@ -104,6 +107,7 @@ impl RunOutcome {
             Self::Cancelled => "cancelled",
             Self::Released => "released",
             Self::Failed(_) => "failed",
+            Self::StorageFault(_) => "storage-fault",
         }
     }
 }
@@ -148,20 +152,39 @@ async fn execute(ctx: &JobContext, job: db::jobs::ClaimedJob) -> anyhow::Result<
         other => Err(anyhow!("unknown job kind {other:?}")),
     };
     ctx.controls.unregister(job.job_id);
-    let outcome = result.unwrap_or_else(|e| RunOutcome::Failed(format!("{e:#}")));
+    let outcome = result.unwrap_or_else(|e| match db::storage_fault_in(&e) {
+        Some(fault) => RunOutcome::StorageFault(format!("{e:#} ({fault})")),
+        None => RunOutcome::Failed(format!("{e:#}")),
+    });
     use db::jobs::FinalStatus;
+    let (pool, id) = (&ctx.pool, job.job_id);
     match &outcome {
         RunOutcome::Succeeded => {
-            db::jobs::finish(&ctx.pool, job.job_id, FinalStatus::Succeeded, None).await?
+            write_when_storage_allows(ctx, || {
+                db::jobs::finish(pool, id, FinalStatus::Succeeded, None)
+            })
+            .await?
         }
         RunOutcome::Cancelled => {
-            db::jobs::finish(&ctx.pool, job.job_id, FinalStatus::Cancelled, None).await?
+            write_when_storage_allows(ctx, || {
+                db::jobs::finish(pool, id, FinalStatus::Cancelled, None)
+            })
+            .await?
         }
         RunOutcome::Failed(e) => {
             tracing::error!(error = %e, "job failed");
-            db::jobs::finish(&ctx.pool, job.job_id, FinalStatus::Failed, Some(e)).await?
+            write_when_storage_allows(ctx, || {
+                db::jobs::finish(pool, id, FinalStatus::Failed, Some(e))
+            })
+            .await?
         }
-        RunOutcome::Released => db::jobs::release(&ctx.pool, job.job_id).await?,
+        RunOutcome::Released => {
+            write_when_storage_allows(ctx, || db::jobs::release(pool, id)).await?
+        }
+        RunOutcome::StorageFault(e) => {
+            tracing::warn!(error = %e, "storage fault; the job goes back to the queue");
+            write_when_storage_allows(ctx, || db::jobs::release(pool, id)).await?
+        }
     }
     let seconds = started.elapsed().as_secs_f64();
     ctx.metrics.observe_job(&job.kind, outcome.label(), seconds);
@@ -170,6 +193,37 @@ async fn execute(ctx: &JobContext, job: db::jobs::ClaimedJob) -> anyhow::Result<
         job_id: job.job_id,
         outcome,
     })
+}
+
+/// Longest pause between attempts to write while storage is faulty.
+pub const MAX_STORAGE_BACKOFF: Duration = Duration::from_secs(30);
+
+/// Runs a write, and while it fails with a storage fault retries it with exponential
+/// backoff, so a job's state is recorded once storage recovers instead of being lost or
+/// turned into a failure. Gives up on shutdown: jobs left running are re-queued at start-up.
+async fn write_when_storage_allows<F, Fut>(ctx: &JobContext, mut write: F) -> anyhow::Result<()>
+where
+    F: FnMut() -> Fut,
+    Fut: std::future::Future<Output = sqlx::Result<()>>,
+{
+    let mut pause = Duration::from_millis(250);
+    loop {
+        match write().await {
+            Ok(()) => return Ok(()),
+            Err(e) => {
+                let Some(fault) = db::storage_fault(&e) else {
+                    return Err(e.into());
+                };
+                if ctx.controls.is_shutting_down() {
+                    tracing::warn!(%fault, "storage fault at shutdown; the job is re-queued at the next start");
+                    return Ok(());
+                }
+                tracing::warn!(%fault, retry_in = ?pause, "cannot record the job's state");
+                tokio::time::sleep(pause).await;
+                pause = (pause * 2).min(MAX_STORAGE_BACKOFF);
+            }
+        }
+    }
 }
 
 /// Decides how an interrupted job ends: a cancel request wins over shutdown.

@@ -124,7 +124,8 @@ fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
     sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo as f64)
 }
 
-fn histogram(sorted: &[f64], bins: usize) -> Histogram {
+/// Equal-width histogram of non-empty sorted values over [min, max].
+pub fn histogram(sorted: &[f64], bins: usize) -> Histogram {
     let (min, max) = (sorted[0], sorted[sorted.len() - 1]);
     let width = (max - min) / bins as f64;
     let edges = (0..=bins).map(|b| min + width * b as f64).collect();

@@ -43,6 +43,7 @@ pub(super) async fn run(
             db::models::set_trained(&ctx.pool, &payload.model_id, "ready", Some(&manifest)).await?;
             Ok(RunOutcome::Succeeded)
         }
+        Err(e) if db::storage_fault_in(&e).is_some() => Err(e.context("training")),
         Err(e) => {
             let outcome = match stop_outcome(ctx, job.job_id, flag).await? {
                 Some(stop) => stop,

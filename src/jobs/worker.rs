@@ -6,7 +6,8 @@ use std::time::Duration;
 
 use tokio::sync::{Notify, watch};
 
-use super::{ExecutionOutcome, JobContext, try_execute_job};
+use super::{ExecutionOutcome, JobContext, MAX_STORAGE_BACKOFF, try_execute_job};
+use crate::db;
 
 /// Fallback poll interval, for jobs enqueued by another process on the same database.
 const POLL_INTERVAL: Duration = Duration::from_secs(5);
@@ -22,14 +23,27 @@ pub async fn run_worker_until_stopped(
     mut stop: watch::Receiver<bool>,
 ) {
     tracing::info!(worker, "worker started");
+    // Grows while storage refuses writes (claims are writes), so a read-only database or a
+    // full disk is polled ever more slowly instead of flooding the log.
+    let mut storage_backoff = ERROR_BACKOFF;
     while !*stop.borrow() {
         let attempt = tokio::spawn({
             let ctx = ctx.clone();
             async move { try_execute_job(&ctx).await }
         });
-        let pause = match attempt.await {
+        let result = attempt.await;
+        if !matches!(&result, Ok(Err(e)) if db::storage_fault_in(e).is_some()) {
+            storage_backoff = ERROR_BACKOFF;
+        }
+        let pause = match result {
             Ok(Ok(ExecutionOutcome::TaskCompleted { .. })) => continue,
             Ok(Ok(ExecutionOutcome::EmptyQueue)) => POLL_INTERVAL,
+            Ok(Err(e)) if db::storage_fault_in(&e).is_some() => {
+                let pause = storage_backoff;
+                tracing::warn!(worker, error = format!("{e:#}"), retry_in = ?pause, "storage cannot take writes");
+                storage_backoff = (storage_backoff * 2).min(MAX_STORAGE_BACKOFF);
+                pause
+            }
             Ok(Err(e)) => {
                 tracing::error!(worker, error = format!("{e:#}"), "cannot run a job");
                 ERROR_BACKOFF

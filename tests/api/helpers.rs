@@ -24,6 +24,8 @@ pub const MAX_COUNT: u32 = 50;
 pub const MAX_QUEUE: i64 = 3;
 /// Body limit in tests.
 pub const MAX_UPLOAD: usize = 64 * 1024;
+/// JSON body limit in tests.
+pub const MAX_JSON: usize = 16 * 1024;
 
 /// A running test service.
 pub struct TestApp {
@@ -86,14 +88,33 @@ pub async fn spawn_app_with(engine: AnalyticEngine) -> TestApp {
     spawn_on(engine, dir, url).await
 }
 
+/// Starts a service with the default analytic engine and settings changed by `configure`.
+pub async fn spawn_app_configured(configure: impl FnOnce(&mut Config)) -> TestApp {
+    let dir = Arc::new(tempfile::tempdir().expect("temp dir"));
+    let url = format!("sqlite://{}", dir.path().join("aortagen.db").display());
+    spawn_on_configured(AnalyticEngine::default(), dir, url, configure).await
+}
+
 /// Starts a service on an existing database (a restart).
 pub async fn spawn_on(engine: AnalyticEngine, dir: Arc<tempfile::TempDir>, url: String) -> TestApp {
+    spawn_on_configured(engine, dir, url, |_| {}).await
+}
+
+/// Starts a service on an existing database with the test settings, then `configure`'s.
+pub async fn spawn_on_configured(
+    engine: AnalyticEngine,
+    dir: Arc<tempfile::TempDir>,
+    url: String,
+    configure: impl FnOnce(&mut Config),
+) -> TestApp {
     init_tracing();
     let mut config = Config::with_database(url.clone(), "127.0.0.1:0");
     config.max_count = MAX_COUNT;
     config.max_queue = MAX_QUEUE;
     config.max_upload_bytes = MAX_UPLOAD;
+    config.max_json_bytes = MAX_JSON;
     config.models_dir = dir.path().join("models");
+    configure(&mut config);
     let engine = Arc::new(engine);
     let app = Application::build(config, engine.clone())
         .await

@@ -11,7 +11,7 @@ use crate::engine::AnalyticEngine;
 use crate::helpers::{TestApp, cohort_body, spawn_app, spawn_app_with, spawn_on};
 
 /// Waits until the engine has been called `n` times (a held call is then in progress).
-async fn wait_for_calls(app: &TestApp, n: usize) {
+pub async fn wait_for_calls(app: &TestApp, n: usize) {
     for _ in 0..5000 {
         if app.engine.calls.load(Ordering::SeqCst) >= n {
             return;

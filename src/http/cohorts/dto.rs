@@ -56,8 +56,9 @@ pub struct CreateCohort {
 }
 
 impl CreateCohort {
-    /// Rules that need no database: ranges and the weights' own consistency.
-    pub fn check_shape(&self, max_count: u32) -> Result<(), ApiError> {
+    /// Rules that need no database: ranges, the work budget (`count × resolution³` voxels at
+    /// most `max_voxels`) and the weights' own consistency.
+    pub fn check_shape(&self, max_count: u32, max_voxels: u64) -> Result<(), ApiError> {
         if !(1..=i64::from(max_count)).contains(&self.count) {
             let msg = format!("must be between 1 and {max_count}, got {}", self.count);
             return Err(ApiError::invalid("count", "range", msg));
@@ -70,6 +71,17 @@ impl CreateCohort {
         if let Some(r) = self.resolution.filter(|r| !(lo..=hi).contains(r)) {
             let msg = format!("must be between {lo} and {hi}, got {r}");
             return Err(ApiError::invalid("resolution", "range", msg));
+        }
+        let resolution = self.resolution.unwrap_or(DEFAULT_RESOLUTION) as u64;
+        let voxels = (self.count as u64).saturating_mul(resolution.pow(3));
+        if voxels > max_voxels {
+            let most = max_voxels / resolution.pow(3);
+            let msg = format!(
+                "count × resolution³ must not exceed {max_voxels} voxels, got {} × {resolution}³ = \
+                 {voxels}; at resolution {resolution} at most {most} shapes",
+                self.count
+            );
+            return Err(ApiError::invalid("count", "budget", msg));
         }
         if let Some(w) = &self.weights {
             check_weights(w, self.arity as usize).map_err(|m| weights_error(&m))?;

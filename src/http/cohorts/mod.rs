@@ -38,8 +38,9 @@ pub(super) fn router() -> OpenApiRouter<AppState> {
         (status = 202, body = CohortView, description = "Accepted; `Location` names the cohort"),
         (status = 400, body = Problem, content_type = "application/problem+json"),
         (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown model"),
+        (status = 413, body = Problem, content_type = "application/problem+json", description = "Body over the JSON size limit"),
         (status = 415, body = Problem, content_type = "application/problem+json"),
-        (status = 422, body = Problem, content_type = "application/problem+json"),
+        (status = 422, body = Problem, content_type = "application/problem+json", description = "A rule is broken, e.g. `count` over the work budget `count × resolution³`"),
         (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After"),
     ))]
 async fn create_cohort(
@@ -48,7 +49,7 @@ async fn create_cohort(
     ApiJson(req): ApiJson<CreateCohort>,
 ) -> Result<Response> {
     let key = idempotency_key(&headers)?;
-    req.check_shape(state.config.max_count)?;
+    req.check_shape(state.config.max_count, state.config.max_cohort_voxels)?;
     let model = db::models::get(&state.pool, &req.model_id)
         .await?
         .ok_or_else(|| ApiError::not_found("model", &req.model_id))?;

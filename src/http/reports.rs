@@ -1,0 +1,207 @@
+//! Plots (`image/svg+xml`) and self-contained HTML reports of models and cohorts, built
+//! from what is stored: a model's evaluation, a cohort's shapes and pairwise metrics.
+
+use std::path::Path as FsPath;
+
+use axum::extract::{Path, State};
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use utoipa_axum::{router::OpenApiRouter, routes};
+
+use super::AppState;
+use super::error::{ApiError, Problem, Result};
+use super::extract::parse_id;
+use crate::db;
+use crate::db::cohorts::CohortRow;
+use crate::engine::read_evaluation;
+use crate::jobs::engine::ModelInfo;
+use crate::report::{Report, Section, footer, render_html, sections};
+
+/// Plots of a model, by name.
+pub const MODEL_PLOTS: [&str; 1] = ["reconstruction-cd"];
+/// Plots of a cohort, by name.
+pub const COHORT_PLOTS: [&str; 3] = ["pairwise-cd", "area", "volume"];
+
+pub(super) fn router() -> OpenApiRouter<AppState> {
+    OpenApiRouter::new()
+        .routes(routes!(model_plot))
+        .routes(routes!(model_report))
+        .routes(routes!(cohort_plot))
+        .routes(routes!(cohort_report))
+}
+
+/// A plot of a model as SVG: `reconstruction-cd` (the training shapes' reconstruction
+/// Chamfer distances with the sampling floor).
+#[utoipa::path(get, path = "/v1/models/{id}/plots/{plot}", tag = "reports",
+    params(("id" = String, Path, description = "Model id"),
+           ("plot" = String, Path, description = "Plot name: reconstruction-cd")),
+    responses((status = 200, content_type = "image/svg+xml", body = String),
+              (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown model or plot")))]
+async fn model_plot(
+    State(state): State<AppState>,
+    Path((id, plot)): Path<(String, String)>,
+) -> Result<Response> {
+    let name = plot.trim_end_matches(".svg");
+    if !MODEL_PLOTS.contains(&name) {
+        return Err(unknown_plot(&plot, &MODEL_PLOTS));
+    }
+    let sections = model_sections(&state, &id).await?.1;
+    Ok(svg(sections
+        .into_iter()
+        .next()
+        .map(|s| s.svg)
+        .unwrap_or_default()))
+}
+
+/// The model's report as one self-contained HTML page.
+#[utoipa::path(get, path = "/v1/models/{id}/report", tag = "reports",
+    params(("id" = String, Path, description = "Model id")),
+    responses((status = 200, content_type = "text/html", body = String),
+              (status = 404, body = Problem, content_type = "application/problem+json")))]
+async fn model_report(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response> {
+    let (facts, sections) = model_sections(&state, &id).await?;
+    Ok(html(&Report {
+        title: format!("Model {id}"),
+        facts,
+        sections,
+        footer: footer(),
+    }))
+}
+
+/// A plot of a cohort as SVG: `pairwise-cd` (the seed paper's Fig. 3), `area` or `volume`
+/// (per shape, mm² / mm³). A cohort still running shows the shapes done so far.
+#[utoipa::path(get, path = "/v1/cohorts/{id}/plots/{plot}", tag = "reports",
+    params(("id" = i64, Path, description = "Cohort id"),
+           ("plot" = String, Path, description = "Plot name: pairwise-cd, area or volume")),
+    responses((status = 200, content_type = "image/svg+xml", body = String),
+              (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown cohort or plot")))]
+async fn cohort_plot(
+    State(state): State<AppState>,
+    Path((id, plot)): Path<(String, String)>,
+) -> Result<Response> {
+    let name = plot.trim_end_matches(".svg");
+    let Some(position) = COHORT_PLOTS.iter().position(|p| *p == name) else {
+        return Err(unknown_plot(&plot, &COHORT_PLOTS));
+    };
+    let cohort = load_cohort(&state, &id).await?;
+    let mut sections = cohort_sections(&state, &cohort).await?;
+    Ok(svg(sections.swap_remove(position).svg))
+}
+
+/// The cohort's report as one self-contained HTML page.
+#[utoipa::path(get, path = "/v1/cohorts/{id}/report", tag = "reports",
+    params(("id" = i64, Path, description = "Cohort id")),
+    responses((status = 200, content_type = "text/html", body = String),
+              (status = 404, body = Problem, content_type = "application/problem+json")))]
+async fn cohort_report(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response> {
+    let cohort = load_cohort(&state, &id).await?;
+    let sections = cohort_sections(&state, &cohort).await?;
+    let weights = cohort
+        .weights
+        .clone()
+        .unwrap_or_else(|| cohort.weighting.clone());
+    let facts = vec![
+        ("model".to_owned(), cohort.model_id.clone()),
+        ("status".into(), cohort.status.clone()),
+        (
+            "shapes".into(),
+            format!("{} of {}", cohort.shapes_done, cohort.count),
+        ),
+        ("arity".into(), cohort.arity.to_string()),
+        ("weights".into(), weights),
+        ("seed".into(), cohort.seed.to_string()),
+        ("resolution".into(), format!("{}³", cohort.resolution)),
+        ("created".into(), cohort.created_at.clone()),
+    ];
+    Ok(html(&Report {
+        title: format!("Cohort {}", cohort.cohort_id),
+        facts,
+        sections,
+        footer: footer(),
+    }))
+}
+
+/// Facts and sections of a model report, in [`MODEL_PLOTS`] order.
+async fn model_sections(
+    state: &AppState,
+    id: &str,
+) -> Result<(Vec<(String, String)>, Vec<Section>)> {
+    let row = db::models::get(&state.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("model", id))?;
+    let info: Option<ModelInfo> = serde_json::from_str(&row.manifest).ok();
+    let shapes = info
+        .as_ref()
+        .map(|i| i.training_shapes.clone())
+        .unwrap_or_default();
+    let cds: Vec<f64> = shapes.iter().filter_map(|s| s.reconstruction_cd).collect();
+    let dir = row.dir_path.clone();
+    let floor = tokio::task::spawn_blocking(move || {
+        read_evaluation(FsPath::new(&dir)).map(|e| e.sampling_floor_median)
+    })
+    .await
+    .map_err(anyhow::Error::from)?;
+    let facts = vec![
+        ("status".to_owned(), row.status.clone()),
+        ("training shapes".into(), shapes.len().to_string()),
+        (
+            "latent dimension".into(),
+            info.as_ref()
+                .map_or("?".into(), |i| i.latent_dim.to_string()),
+        ),
+        ("registered".into(), row.created_at.clone()),
+    ];
+    Ok((facts, vec![sections::reconstruction_cd(&cds, floor)]))
+}
+
+/// Sections of a cohort report, in [`COHORT_PLOTS`] order.
+async fn cohort_sections(state: &AppState, cohort: &CohortRow) -> Result<Vec<Section>> {
+    let matrix: Vec<Vec<f64>> = match db::cohort_metrics::get(&state.pool, cohort.cohort_id).await?
+    {
+        Some(row) => serde_json::from_str(&row.matrix).map_err(anyhow::Error::from)?,
+        None => Vec::new(),
+    };
+    let shapes = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, i64::MAX, 0).await?;
+    let area: Vec<f64> = shapes.iter().map(|s| s.area_mm2).collect();
+    let volume: Vec<f64> = shapes.iter().map(|s| s.volume_mm3).collect();
+    Ok(vec![
+        sections::pairwise_cd(&matrix),
+        sections::distribution(
+            "Surface area",
+            "Area of each generated surface in millimetres (training frame restored).",
+            "area (mm²)",
+            &area,
+            &[],
+        ),
+        sections::distribution(
+            "Enclosed volume",
+            "Volume enclosed by each generated surface (closed meshes), in millimetres.",
+            "volume (mm³)",
+            &volume,
+            &[],
+        ),
+    ])
+}
+
+async fn load_cohort(state: &AppState, raw: &str) -> Result<CohortRow> {
+    let id = parse_id("cohort", raw)?;
+    db::cohorts::get(&state.pool, id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("cohort", raw))
+}
+
+fn unknown_plot(plot: &str, known: &[&str]) -> ApiError {
+    ApiError::not_found("plot", format!("{plot} (available: {})", known.join(", ")))
+}
+
+fn svg(body: String) -> Response {
+    ([(header::CONTENT_TYPE, "image/svg+xml")], body).into_response()
+}
+
+fn html(report: &Report) -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/html; charset=utf-8")],
+        render_html(report),
+    )
+        .into_response()
+}
