@@ -20,8 +20,9 @@ use crate::sdf::backend::Backend;
 use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
 use crate::sdf::evaluation::EvaluationReport;
-use crate::sdf::generate::Mixture;
+use crate::sdf::generate::{Mixture, noisy_latent};
 use crate::sdf::manifest::MANIFEST_FILE;
+use crate::sdf::novelty::{NoveltyReference, training_surfaces};
 use crate::sdf::reconstruct::{ExtractionMethod, reconstruct};
 use crate::sdf::store::LoadedModel;
 use crate::sdf::training::{TrainingObserver, TrainingRequest, train};
@@ -44,6 +45,8 @@ pub struct SdfEngine {
     /// Loaded models by directory, so each shape does not reload the weights. A model
     /// directory's content never changes once registered.
     models: Mutex<HashMap<PathBuf, Arc<Mutex<CachedModel>>>>,
+    /// Training surfaces for novelty, by model directory and resolution.
+    references: Mutex<HashMap<(PathBuf, usize), Arc<NoveltyReference>>>,
 }
 
 impl SdfEngine {
@@ -54,10 +57,12 @@ impl SdfEngine {
             extraction: ExtractionMethod::Fast,
             chamfer_points: DEFAULT_CHAMFER_POINTS,
             models: Mutex::new(HashMap::new()),
+            references: Mutex::new(HashMap::new()),
         }
     }
 
-    /// Uses `points` surface samples per shape for the cohort's pairwise Chamfer distances.
+    /// Uses `points` surface samples per shape for the cohort's pairwise Chamfer distances
+    /// and the novelty against the training shapes.
     pub fn with_chamfer_points(mut self, points: usize) -> Self {
         self.chamfer_points = points.max(1);
         self
@@ -105,6 +110,14 @@ impl CohortEngine for SdfEngine {
         })
     }
 
+    fn training_latents(&self, model_dir: &Path) -> anyhow::Result<Vec<Vec<f32>>> {
+        let cached = self.model(model_dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        Ok(cached.latents.clone())
+    }
+
     fn generate_shape(
         &self,
         model_dir: &Path,
@@ -127,7 +140,8 @@ impl CohortEngine for SdfEngine {
             weights: spec.weights.clone(),
         };
         let transform = mixture.mix_transforms(&cached.model.manifest.transforms())?;
-        let field = cached.model.field(&mixture.mix_latents(&cached.latents))?;
+        let latent = noisy_latent(&mixture, &cached.latents, spec.latent_noise, spec.seed);
+        let field = cached.model.field(&latent)?;
         let extraction = reconstruct(&field, spec.resolution, self.extraction)?;
         let mesh_unit = extraction.mesh;
         let mesh_mm = transform.mesh_to_mesh_units(&mesh_unit);
@@ -137,6 +151,38 @@ impl CohortEngine for SdfEngine {
             mesh_unit,
             transform,
         })
+    }
+
+    fn novelty_reference(
+        &self,
+        model_dir: &Path,
+        resolution: usize,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<Arc<NoveltyReference>> {
+        let key = (model_dir.to_path_buf(), resolution);
+        let cached = self.model(model_dir)?;
+        // Held while extracting, so concurrent jobs on one model build the reference once.
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        let lock_references = || {
+            self.references
+                .lock()
+                .map_err(|_| anyhow::anyhow!("reference cache poisoned"))
+        };
+        if let Some(reference) = lock_references()?.get(&key) {
+            return Ok(reference.clone());
+        }
+        let surfaces = training_surfaces(
+            &cached.model,
+            &cached.latents,
+            resolution,
+            self.extraction,
+            cancel,
+        )?;
+        let reference = Arc::new(NoveltyReference::new(&surfaces, self.chamfer_points)?);
+        lock_references()?.insert(key, reference.clone());
+        Ok(reference)
     }
 
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>> {

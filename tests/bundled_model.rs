@@ -47,3 +47,40 @@ fn fast_extraction_equals_dense_on_the_bundled_model() {
         assert!(fast.evaluations.samples < dense.evaluations.samples);
     }
 }
+
+#[test]
+fn the_engine_finds_a_training_shape_as_its_own_nearest_neighbour() {
+    use std::sync::atomic::AtomicBool;
+
+    use aortagen::engine::SdfEngine;
+    use aortagen::jobs::engine::{CohortEngine, ShapeSpec};
+
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
+    let engine = SdfEngine::new(Backend::default()).with_chamfer_points(10_000);
+    let cancel = AtomicBool::new(false);
+    let reference = engine.novelty_reference(&dir, 48, &cancel).unwrap();
+    assert_eq!(reference.len(), bundled().num_shapes());
+    let again = engine.novelty_reference(&dir, 48, &cancel).unwrap();
+    assert!(
+        std::sync::Arc::ptr_eq(&reference, &again),
+        "cached per model and resolution"
+    );
+    // Weight 1 on training shape 3: the same surface, sampled differently.
+    let spec = ShapeSpec {
+        training_indices: vec![3, 5],
+        weights: vec![1.0, 0.0],
+        seed: 11,
+        resolution: 48,
+        latent_noise: 0.0,
+    };
+    let copy = engine.generate_shape(&dir, &spec, &cancel).unwrap();
+    let own = reference.novelty(&copy.mesh_unit, 11).unwrap();
+    assert_eq!(own.nearest, 3);
+    let mixed = ShapeSpec {
+        weights: vec![0.5, 0.5],
+        ..spec
+    };
+    let blend = engine.generate_shape(&dir, &mixed, &cancel).unwrap();
+    let other = reference.novelty(&blend.mesh_unit, 11).unwrap();
+    assert!(other.chamfer > own.chamfer, "{other:?} vs {own:?}");
+}

@@ -17,6 +17,7 @@ pub mod geodesic;
 pub mod polyline;
 pub mod root;
 pub mod sections;
+pub mod shape;
 pub mod surface;
 pub mod tracking;
 

@@ -14,7 +14,7 @@
 
 use super::centreline::Centreline;
 use super::surface::Surface;
-use super::{MeasureError, MeasureOptions, RootMeasurements, measure_prepared};
+use super::{MeasureError, MeasureOptions, RootMeasurements, VesselMeasurements, measure_prepared};
 use crate::geometry::TriMesh;
 use crate::geometry::mesh::{norm, normalized, sub};
 
@@ -323,6 +323,13 @@ pub fn measure_root(mesh: &TriMesh) -> Result<RootMeasurements, MeasureError> {
 pub fn measure_root_with_landmarks(
     mesh: &TriMesh,
 ) -> Result<(RootMeasurements, RootLandmarks), MeasureError> {
+    measure_root_with_profile(mesh).map(|(m, l, _)| (m, l))
+}
+
+/// [`measure_root_with_landmarks`] together with the centreline profile it was read from.
+pub fn measure_root_with_profile(
+    mesh: &TriMesh,
+) -> Result<(RootMeasurements, RootLandmarks, VesselMeasurements), MeasureError> {
     let surface = Surface::new(mesh)?;
     let opts = MeasureOptions::default();
     let (line, vessel) = measure_prepared(&surface, &opts)?;
@@ -412,5 +419,5 @@ pub fn measure_root_with_landmarks(
         annulus_s_mm: to_s(sigma_annulus),
         stj_s_mm: to_s(sigma_stj),
     };
-    Ok((measurements, landmarks))
+    Ok((measurements, landmarks, vessel))
 }

@@ -6,8 +6,13 @@ use anyhow::{Context, ensure};
 
 use super::progress::{init_logging, terminal_bar};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
+use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
 use crate::sdf::backend::Backend;
-use crate::sdf::generate::{MixSpec, Provenance, Weighting, generate_shape, parse_weights};
+use crate::sdf::generate::{
+    Diversity, GeneratedShape, MAX_REDRAWS, MixSpec, Provenance, Selection, Weighting,
+    generate_shape_with, parse_weights,
+};
+use crate::sdf::novelty::{Novelty, NoveltyReference, training_surfaces};
 use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
 use crate::sdf::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
 use crate::sdf::store::LoadedModel;
@@ -37,6 +42,21 @@ pub struct GenerateArgs {
     /// Weights when --weights is absent.
     #[arg(long, value_enum, default_value = "dirichlet")]
     pub weighting: Weighting,
+    /// How the training latents are picked: `uniform`, or `spread` (k-means++ style, far
+    /// from the mean and from each other).
+    #[arg(long, value_enum, default_value = "uniform")]
+    pub selection: Selection,
+    /// Gaussian noise added to the mixed latent, in training standard deviations (≥ 0).
+    #[arg(long, default_value_t = 0.0)]
+    pub latent_noise: f64,
+    /// Smallest accepted Chamfer distance (unit-ball coordinates) to the nearest training
+    /// shape: closer shapes are redrawn up to 10 times, then the most novel draw is kept and
+    /// flagged `novelty_met: false` in its provenance.
+    #[arg(long)]
+    pub min_novelty: Option<f64>,
+    /// Surface samples per shape for the novelty Chamfer distance.
+    #[arg(long, default_value_t = DEFAULT_CHAMFER_POINTS)]
+    pub novelty_points: usize,
     /// Number of shapes.
     #[arg(long, default_value_t = 1)]
     pub count: u64,
@@ -75,6 +95,20 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&args.resolution),
         "--resolution must be between {MIN_RESOLUTION} and {MAX_RESOLUTION}"
     );
+    ensure!(
+        args.latent_noise.is_finite() && args.latent_noise >= 0.0,
+        "--latent-noise must be a finite number ≥ 0"
+    );
+    if let Some(m) = args.min_novelty {
+        ensure!(
+            m.is_finite() && m >= 0.0,
+            "--min-novelty must be a finite number ≥ 0"
+        );
+    }
+    let diversity = Diversity {
+        selection: args.selection,
+        latent_noise: args.latent_noise,
+    };
     let weights = match &args.weights {
         Some(text) => Some(parse_weights(text).map_err(|e| anyhow::anyhow!("--weights: {e}"))?),
         None => None,
@@ -94,20 +128,61 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         Units::Mm => "mm",
         Units::Unit => "unit",
     };
+    let surfaces = training_surfaces(
+        &model,
+        &latents,
+        args.resolution,
+        args.extraction,
+        &std::sync::atomic::AtomicBool::new(false),
+    )
+    .context("cannot reconstruct the training shapes for the novelty measure")?;
+    let reference = NoveltyReference::new(&surfaces, args.novelty_points)?;
+    let attempts = if args.min_novelty.is_some() {
+        MAX_REDRAWS + 1
+    } else {
+        1
+    };
     let bar = terminal_bar(args.count, "shapes");
+    let mut report = Vec::new();
     for shape in 0..args.count {
-        let generated = generate_shape(
-            &model,
-            &latents,
-            &spec,
-            args.seed,
-            shape,
-            args.resolution,
-            args.extraction,
-        )
-        .with_context(|| format!("shape {shape}"))?;
-        let provenance =
-            Provenance::new(&model, &generated, args.seed, shape, args.resolution, units);
+        let mut best: Option<(GeneratedShape, Novelty, u32)> = None;
+        let mut redraws = 0;
+        for attempt in 0..attempts {
+            let generated = generate_shape_with(
+                &model,
+                &latents,
+                &spec,
+                diversity,
+                (args.seed, shape, attempt),
+                args.resolution,
+                args.extraction,
+            )
+            .with_context(|| format!("shape {shape}"))?;
+            let novelty = reference
+                .novelty(&generated.mesh, args.seed ^ shape)
+                .with_context(|| format!("shape {shape}: novelty"))?;
+            redraws = attempt;
+            if best
+                .as_ref()
+                .is_none_or(|(_, b, _)| novelty.chamfer > b.chamfer)
+            {
+                best = Some((generated, novelty, attempt));
+            }
+            if args.min_novelty.is_none_or(|m| novelty.chamfer >= m) {
+                break;
+            }
+        }
+        let (generated, novelty, attempt) = best.context("no draw was made")?;
+        let novelty_met = args.min_novelty.is_none_or(|m| novelty.chamfer >= m);
+        let provenance = Provenance {
+            selection: diversity.selection,
+            latent_noise: diversity.latent_noise,
+            attempt,
+            novelty: Some(novelty),
+            redraws,
+            novelty_met: Some(novelty_met),
+            ..Provenance::new(&model, &generated, args.seed, shape, args.resolution, units)
+        };
         let mesh = match args.units {
             Units::Mm => generated.mesh_in_mesh_units(),
             Units::Unit => generated.mesh.clone(),
@@ -124,6 +199,21 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         let json_path = stem.with_extension("json");
         std::fs::write(&json_path, serde_json::to_vec_pretty(&provenance)?)
             .with_context(|| format!("cannot write {}", json_path.display()))?;
+        let name = &model.manifest.shapes[novelty.nearest].name;
+        report.push(format!(
+            "shape_{shape:04}: novelty {:.3e} (nearest training shape {} {name}){}{}",
+            novelty.chamfer,
+            novelty.nearest,
+            match redraws {
+                0 => String::new(),
+                r => format!(", {r} redraws"),
+            },
+            if novelty_met {
+                ""
+            } else {
+                ", below --min-novelty"
+            },
+        ));
         match &bar {
             Some(bar) => bar.inc(1),
             None => tracing::info!(
@@ -138,6 +228,9 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     }
     if let Some(bar) = bar {
         bar.finish_and_clear();
+    }
+    for line in &report {
+        println!("{line}");
     }
     println!(
         "{} shapes from model {} written to {} ({units})",

@@ -21,6 +21,12 @@ pub struct NewCohort<'a> {
     pub seed: i64,
     /// Marching-cubes resolution.
     pub resolution: i64,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: f64,
+    /// `uniform` or `spread`.
+    pub selection: &'a str,
+    /// Smallest accepted Chamfer distance to a training shape.
+    pub min_novelty: Option<f64>,
     /// Client-chosen retry key.
     pub idempotency_key: Option<&'a str>,
     /// Hash of the canonical request.
@@ -48,6 +54,14 @@ pub struct CohortRow {
     pub seed: i64,
     /// Resolution.
     pub resolution: i64,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: f64,
+    /// Selection strategy of the mixed latents.
+    pub selection: String,
+    /// Smallest accepted Chamfer distance to a training shape.
+    pub min_novelty: Option<f64>,
+    /// Redraws over the stored shapes.
+    pub redraws_total: i64,
     /// Hash of the request (idempotency checks).
     pub request_hash: String,
     /// The job's status.
@@ -65,7 +79,10 @@ pub struct CohortRow {
 }
 
 const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity, c.weighting,
-        c.weights, c.seed, c.resolution, c.request_hash, j.status,
+        c.weights, c.seed, c.resolution, c.latent_noise, c.selection, c.min_novelty,
+        (select coalesce(sum(s.redraws), 0) from shape s where s.cohort_id = c.cohort_id)
+            as redraws_total,
+        c.request_hash, j.status,
         (select count(*) from shape s where s.cohort_id = c.cohort_id) as shapes_done,
         j.error, c.created_at, j.started_at, j.finished_at
     from cohort c join job j on j.job_id = c.job_id";
@@ -77,8 +94,8 @@ pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Res
         .map(|w| serde_json::to_string(w).expect("f64 slices serialise"));
     sqlx::query_scalar(
         "insert into cohort (model_id, job_id, count, arity, weighting, weights, seed,
-             resolution, idempotency_key, request_hash)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?) returning cohort_id",
+             resolution, latent_noise, selection, min_novelty, idempotency_key, request_hash)
+         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) returning cohort_id",
     )
     .bind(c.model_id)
     .bind(c.job_id)
@@ -88,6 +105,9 @@ pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Res
     .bind(weights)
     .bind(c.seed)
     .bind(c.resolution)
+    .bind(c.latent_noise)
+    .bind(c.selection)
+    .bind(c.min_novelty)
     .bind(c.idempotency_key)
     .bind(c.request_hash)
     .fetch_one(conn)

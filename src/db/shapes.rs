@@ -35,6 +35,24 @@ pub struct NewShape<'a> {
     pub mesh: &'a [u8],
     /// Hex SHA-256 of `mesh`.
     pub mesh_sha256: &'a str,
+    /// Latent noise it was drawn with.
+    pub latent_noise: f64,
+    /// Selection strategy it was drawn with.
+    pub selection: &'a str,
+    /// Which draw was kept.
+    pub attempt: i64,
+    /// Draws rejected as too close to a training shape.
+    pub redraws: i64,
+    /// Chamfer distance to the nearest training shape.
+    pub novelty_cd: Option<f64>,
+    /// Index of that training shape.
+    pub nearest_training_index: Option<i64>,
+    /// Whether the cohort's min_novelty is met (true when there is none).
+    pub novelty_met: Option<bool>,
+    /// Anatomical measurements (JSON), when they succeeded.
+    pub anatomy: Option<&'a str>,
+    /// Why the measurements failed.
+    pub anatomy_error: Option<&'a str>,
 }
 
 /// A shape's metadata (everything but the mesh bytes).
@@ -76,6 +94,24 @@ pub struct ShapeRow {
     pub radius: f64,
     /// Hex SHA-256 of the stored mesh.
     pub mesh_sha256: String,
+    /// Latent noise it was drawn with.
+    pub latent_noise: f64,
+    /// Selection strategy it was drawn with.
+    pub selection: String,
+    /// Which draw was kept.
+    pub attempt: i64,
+    /// Draws rejected as too close to a training shape.
+    pub redraws: i64,
+    /// Chamfer distance to the nearest training shape.
+    pub novelty_cd: Option<f64>,
+    /// Index of that training shape.
+    pub nearest_training_index: Option<i64>,
+    /// Whether the cohort's min_novelty is met.
+    pub novelty_met: Option<bool>,
+    /// Anatomical measurements (JSON).
+    pub anatomy: Option<String>,
+    /// Why the measurements failed.
+    pub anatomy_error: Option<String>,
     /// Commit time.
     pub created_at: String,
 }
@@ -102,7 +138,9 @@ pub struct StoredMesh {
 const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
         s.training_indices, s.weights, s.seed, s.resolution, s.software_version,
         s.vertex_count, s.triangle_count, s.area_mm2, s.volume_mm3,
-        s.centre_x, s.centre_y, s.centre_z, s.radius, s.mesh_sha256, s.created_at
+        s.centre_x, s.centre_y, s.centre_z, s.radius, s.mesh_sha256, s.latent_noise,
+        s.selection, s.attempt, s.redraws, s.novelty_cd, s.nearest_training_index,
+        s.novelty_met, s.anatomy, s.anatomy_error, s.created_at
     from shape s join cohort c on c.cohort_id = s.cohort_id";
 
 /// Inserts a shape inside the caller's transaction.
@@ -112,8 +150,11 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
     sqlx::query_scalar(
         "insert into shape (cohort_id, shape_index, training_indices, weights, seed, resolution,
              software_version, vertex_count, triangle_count, area_mm2, volume_mm3,
-             centre_x, centre_y, centre_z, radius, mesh, mesh_sha256)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) returning shape_id",
+             centre_x, centre_y, centre_z, radius, mesh, mesh_sha256, latent_noise, selection,
+             attempt, redraws, novelty_cd, nearest_training_index, novelty_met, anatomy,
+             anatomy_error)
+         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
+         returning shape_id",
     )
     .bind(s.cohort_id)
     .bind(s.shape_index)
@@ -132,6 +173,15 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
     .bind(s.radius)
     .bind(s.mesh)
     .bind(s.mesh_sha256)
+    .bind(s.latent_noise)
+    .bind(s.selection)
+    .bind(s.attempt)
+    .bind(s.redraws)
+    .bind(s.novelty_cd)
+    .bind(s.nearest_training_index)
+    .bind(s.novelty_met)
+    .bind(s.anatomy)
+    .bind(s.anatomy_error)
     .fetch_one(conn)
     .await
 }
@@ -222,6 +272,34 @@ pub async fn measure_summary(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<
     )
     .bind(cohort_id)
     .fetch_one(pool)
+    .await
+}
+
+/// A shape's novelty and anatomy, for the cohort's science summaries.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct ScienceRow {
+    /// Shape id.
+    pub shape_id: i64,
+    /// Chamfer distance to the nearest training shape.
+    pub novelty_cd: Option<f64>,
+    /// Index of that training shape.
+    pub nearest_training_index: Option<i64>,
+    /// Whether the cohort's min_novelty is met.
+    pub novelty_met: Option<bool>,
+    /// Draws rejected as too close to a training shape.
+    pub redraws: i64,
+    /// Anatomical measurements (JSON).
+    pub anatomy: Option<String>,
+}
+
+/// Novelty and anatomy of a cohort's shapes in index order.
+pub async fn cohort_science(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<ScienceRow>> {
+    sqlx::query_as(
+        "select shape_id, novelty_cd, nearest_training_index, novelty_met, redraws, anatomy
+         from shape where cohort_id = ? order by shape_index",
+    )
+    .bind(cohort_id)
+    .fetch_all(pool)
     .await
 }
 

@@ -12,6 +12,7 @@ use super::AppState;
 use super::cohorts::{load as load_cohort, page};
 use super::error::{ApiError, Problem, Result};
 use super::extract::{ApiQuery, parse_id};
+use crate::anatomy::shape::ShapeAnatomy;
 use crate::db::{self, mesh_blob, shapes::ShapeRow};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::normalize::UnitBallTransform;
@@ -44,6 +45,21 @@ pub struct ShapeView {
     pub conventions: &'static str,
     /// Download URL (add `?format=` and `&units=`).
     pub mesh_url: String,
+    /// Chamfer distance (squared, unit-ball coordinates) to the nearest training shape, as
+    /// reconstructed by the model at this shape's resolution: how far it is from disclosing
+    /// one training patient.
+    pub novelty_cd: Option<f64>,
+    /// Index of that training shape.
+    pub nearest_training_index: Option<i64>,
+    /// Draws rejected for being closer than the cohort's `min_novelty` (at most 10).
+    pub redraws: i64,
+    /// False when no draw reached the cohort's `min_novelty` and the most novel one was
+    /// kept; true otherwise.
+    pub novelty_met: Option<bool>,
+    /// Anatomical measurements in mm (null when they failed; see `anatomy_error`).
+    pub anatomy: Option<ShapeAnatomy>,
+    /// Why the shape could not be measured as an aortic root nor as a vessel.
+    pub anatomy_error: Option<String>,
 }
 
 /// The model, training shapes, weights, seed and resolution a shape came from.
@@ -61,6 +77,12 @@ pub struct Provenance {
     pub resolution: i64,
     /// aortagen version.
     pub software_version: String,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: f64,
+    /// How the training latents were picked (`uniform` or `spread`).
+    pub selection: String,
+    /// Which draw was kept (0 = the first); `seed` is that draw's seed.
+    pub attempt: i64,
 }
 
 /// A unit-ball transform.
@@ -88,6 +110,9 @@ impl ShapeView {
                 seed: s.seed as u64,
                 resolution: s.resolution,
                 software_version: s.software_version,
+                latent_noise: s.latent_noise,
+                selection: s.selection,
+                attempt: s.attempt,
             },
             vertex_count: s.vertex_count,
             triangle_count: s.triangle_count,
@@ -100,6 +125,12 @@ impl ShapeView {
             },
             conventions: CONVENTIONS,
             mesh_url: format!("/v1/shapes/{}/mesh", s.shape_id),
+            novelty_cd: s.novelty_cd,
+            nearest_training_index: s.nearest_training_index,
+            redraws: s.redraws,
+            novelty_met: s.novelty_met,
+            anatomy: s.anatomy.as_deref().map(parse_json).transpose()?,
+            anatomy_error: s.anatomy_error,
         })
     }
 }

@@ -13,7 +13,11 @@ use sha2::{Digest, Sha256};
 use super::engine::{GeneratedShape, ModelInfo, ShapeSpec};
 use super::plan::{CohortPlan, Weighting};
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
+use crate::anatomy::shape::measure_shape;
 use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
+use crate::sdf::generate::MAX_REDRAWS;
+use crate::sdf::generate::Selection;
+use crate::sdf::novelty::{Novelty, NoveltyReference};
 use crate::telemetry::spawn_blocking_with_span;
 
 /// The payload of a `cohort` job.
@@ -23,8 +27,13 @@ pub struct CohortPayload {
     pub cohort_id: i64,
 }
 
-/// The plan a stored cohort describes.
-pub fn plan_for(cohort: &CohortRow, info: &ModelInfo) -> anyhow::Result<CohortPlan> {
+/// The plan a stored cohort describes; `latents` are the model's training latents (needed
+/// for spread selection only).
+pub fn plan_for(
+    cohort: &CohortRow,
+    info: &ModelInfo,
+    latents: Option<Arc<Vec<Vec<f32>>>>,
+) -> anyhow::Result<CohortPlan> {
     let weights = match &cohort.weights {
         Some(json) => Some(serde_json::from_str(json).context("stored weights are not JSON")?),
         None => None,
@@ -36,6 +45,9 @@ pub fn plan_for(cohort: &CohortRow, info: &ModelInfo) -> anyhow::Result<CohortPl
         weighting: Weighting::parse(&cohort.weighting).context("stored weighting is unknown")?,
         seed: cohort.seed as u64,
         resolution: cohort.resolution as usize,
+        selection: Selection::parse(&cohort.selection).context("stored selection is unknown")?,
+        latent_noise: cohort.latent_noise,
+        latents,
     })
 }
 
@@ -53,8 +65,25 @@ pub(super) async fn run(
         .await?
         .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
     let info: ModelInfo = serde_json::from_str(&model.manifest).context("bad model manifest")?;
-    let plan = plan_for(&cohort, &info)?;
     let model_dir = PathBuf::from(&model.dir_path);
+    let latents = if cohort.selection == Selection::Spread.as_str() {
+        let engine = ctx.engine.clone();
+        let dir = model_dir.clone();
+        let latents = spawn_blocking_with_span(move || engine.training_latents(&dir))
+            .await
+            .map_err(join_error)?
+            .context("cannot read the training latents")?;
+        anyhow::ensure!(
+            latents.len() == info.training_shape_count(),
+            "the engine returned {} latents for {} training shapes",
+            latents.len(),
+            info.training_shape_count()
+        );
+        Some(Arc::new(latents))
+    } else {
+        None
+    };
+    let plan = plan_for(&cohort, &info, latents)?;
 
     let stored: HashSet<i64> = db::shapes::existing_indices(&ctx.pool, cohort.cohort_id)
         .await?
@@ -64,28 +93,80 @@ pub(super) async fn run(
     if done > 0 {
         tracing::info!(done, "resuming cohort");
     }
-    for index in (0..cohort.count).filter(|i| !stored.contains(i)) {
-        if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-            return Ok(stop);
-        }
-        let spec = plan.shape_spec(index as u64);
-        let generated = generate(ctx, model_dir.clone(), spec.clone(), flag.clone()).await;
-        let (shape, blob, sha) = match generated {
-            Ok(g) => g,
+    let missing: Vec<i64> = (0..cohort.count).filter(|i| !stored.contains(i)).collect();
+    let reference = match missing.is_empty() {
+        true => None,
+        false => match novelty_reference(ctx, &model_dir, plan.resolution, flag).await {
+            Ok(r) => Some(r),
             Err(e) => {
                 if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
                     return Ok(stop);
                 }
-                return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}")));
+                return Ok(RunOutcome::Failed(format!("training surfaces: {e:#}")));
             }
+        },
+    };
+    let attempts = match cohort.min_novelty {
+        Some(_) => MAX_REDRAWS + 1,
+        None => 1,
+    };
+    for index in missing {
+        let reference = reference.clone().context("no novelty reference")?;
+        let mut best: Option<Candidate> = None;
+        let mut redraws = 0;
+        for attempt in 0..attempts {
+            if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
+                return Ok(stop);
+            }
+            let spec = plan.shape_spec_attempt(index as u64, attempt);
+            let generated = generate(
+                ctx,
+                model_dir.clone(),
+                spec,
+                reference.clone(),
+                flag.clone(),
+            )
+            .await;
+            let candidate = match generated {
+                Ok(c) => c,
+                Err(e) => {
+                    if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
+                        return Ok(stop);
+                    }
+                    return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}")));
+                }
+            };
+            redraws = attempt;
+            let cd = candidate.novelty.chamfer;
+            let met = cohort.min_novelty.is_none_or(|m| cd >= m);
+            if best
+                .as_ref()
+                .is_none_or(|b| candidate.novelty.chamfer > b.novelty.chamfer)
+            {
+                best = Some(Candidate {
+                    attempt,
+                    ..candidate
+                });
+            }
+            if met {
+                break;
+            }
+            tracing::debug!(index, attempt, cd, "draw too close to a training shape");
+        }
+        let best = best.context("no draw was made")?;
+        let met = cohort.min_novelty.is_none_or(|m| best.novelty.chamfer >= m);
+        let finished = match finish(best).await {
+            Ok(f) => f,
+            Err(e) => return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}"))),
         };
         done += 1;
-        commit_shape(
-            ctx, job.job_id, &cohort, index, &spec, &shape, &blob, &sha, done,
-        )
-        .await?;
+        let outcome = Outcome {
+            redraws: i64::from(redraws),
+            novelty_met: met,
+        };
+        commit_shape(ctx, job.job_id, &cohort, index, &finished, &outcome, done).await?;
         ctx.metrics.inc_shapes_generated();
-        tracing::debug!(index, done, "shape committed");
+        tracing::debug!(index, done, redraws, "shape committed");
     }
     let has_metrics = db::cohort_metrics::get(&ctx.pool, cohort.cohort_id)
         .await?
@@ -99,13 +180,52 @@ pub(super) async fn run(
     Ok(RunOutcome::Succeeded)
 }
 
-/// Generates and encodes one shape off the executor.
+/// One draw of a shape with its distance to the training set.
+struct Candidate {
+    spec: ShapeSpec,
+    shape: GeneratedShape,
+    novelty: Novelty,
+    attempt: u32,
+}
+
+/// The kept draw, encoded for storage and measured.
+struct Finished {
+    candidate: Candidate,
+    blob: Vec<u8>,
+    sha: String,
+    /// Measurements as JSON, or why they failed.
+    anatomy: Result<String, String>,
+}
+
+/// How the kept draw was reached.
+struct Outcome {
+    redraws: i64,
+    novelty_met: bool,
+}
+
+/// The model's training surfaces at the cohort's resolution, off the executor.
+async fn novelty_reference(
+    ctx: &JobContext,
+    model_dir: &std::path::Path,
+    resolution: usize,
+    flag: &Arc<AtomicBool>,
+) -> anyhow::Result<Arc<NoveltyReference>> {
+    let engine = ctx.engine.clone();
+    let dir = model_dir.to_path_buf();
+    let flag = flag.clone();
+    spawn_blocking_with_span(move || engine.novelty_reference(&dir, resolution, &flag))
+        .await
+        .map_err(join_error)?
+}
+
+/// Generates one draw and measures its novelty, off the executor.
 async fn generate(
     ctx: &JobContext,
     model_dir: PathBuf,
     spec: ShapeSpec,
+    reference: Arc<NoveltyReference>,
     flag: Arc<AtomicBool>,
-) -> anyhow::Result<(GeneratedShape, Vec<u8>, String)> {
+) -> anyhow::Result<Candidate> {
     let engine = ctx.engine.clone();
     spawn_blocking_with_span(move || {
         let shape = engine.generate_shape(&model_dir, &spec, &flag)?;
@@ -113,27 +233,62 @@ async fn generate(
             .mesh_unit
             .validate()
             .context("engine returned an invalid mesh")?;
-        let blob = mesh_blob::encode(&shape.mesh_unit);
+        let novelty = reference
+            .novelty(&shape.mesh_unit, spec.seed)
+            .context("novelty")?;
+        anyhow::ensure!(
+            novelty.chamfer.is_finite() && novelty.nearest < reference.len(),
+            "novelty is not a finite distance to a training shape"
+        );
+        Ok(Candidate {
+            spec,
+            shape,
+            novelty,
+            attempt: 0,
+        })
+    })
+    .await
+    .map_err(join_error)?
+}
+
+/// Encodes the kept draw and measures its anatomy in mm, off the executor.
+async fn finish(candidate: Candidate) -> anyhow::Result<Finished> {
+    spawn_blocking_with_span(move || {
+        let blob = mesh_blob::encode(&candidate.shape.mesh_unit);
         let sha = hex(&Sha256::digest(&blob));
-        Ok((shape, blob, sha))
+        let shape = &candidate.shape;
+        let mesh_mm = shape.transform.mesh_to_mesh_units(&shape.mesh_unit);
+        let anatomy = match measure_shape(&mesh_mm) {
+            Ok(a) => Ok(serde_json::to_string(&a)?),
+            Err(e) => Err(e.to_string()),
+        };
+        Ok(Finished {
+            candidate,
+            blob,
+            sha,
+            anatomy,
+        })
     })
     .await
     .map_err(join_error)?
 }
 
 /// Stores one shape and the job's progress in a single transaction.
-#[allow(clippy::too_many_arguments)]
 async fn commit_shape(
     ctx: &JobContext,
     job_id: i64,
     cohort: &CohortRow,
     index: i64,
-    spec: &ShapeSpec,
-    shape: &GeneratedShape,
-    blob: &[u8],
-    sha: &str,
+    finished: &Finished,
+    outcome: &Outcome,
     done: i64,
 ) -> anyhow::Result<()> {
+    let Candidate {
+        spec,
+        shape,
+        novelty,
+        attempt,
+    } = &finished.candidate;
     let row = db::shapes::NewShape {
         cohort_id: cohort.cohort_id,
         shape_index: index,
@@ -148,8 +303,17 @@ async fn commit_shape(
         volume_mm3: shape.volume_mm3,
         centre: shape.transform.centre,
         radius: shape.transform.radius,
-        mesh: blob,
-        mesh_sha256: sha,
+        mesh: &finished.blob,
+        mesh_sha256: &finished.sha,
+        latent_noise: spec.latent_noise,
+        selection: &cohort.selection,
+        attempt: i64::from(*attempt),
+        redraws: outcome.redraws,
+        novelty_cd: Some(novelty.chamfer),
+        nearest_training_index: Some(novelty.nearest as i64),
+        novelty_met: Some(outcome.novelty_met),
+        anatomy: finished.anatomy.as_deref().ok(),
+        anatomy_error: finished.anatomy.as_ref().err().map(String::as_str),
     };
     let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
     db::shapes::insert(&mut tx, &row)

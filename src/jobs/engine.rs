@@ -3,12 +3,14 @@
 //! the whole service on an analytic stand-in.
 
 use std::path::Path;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64};
 
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::TriMesh;
 use crate::geometry::normalize::UnitBallTransform;
+use crate::sdf::novelty::NoveltyReference;
 
 /// Facts about a registered model, reported by the engine and stored as its manifest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -51,6 +53,10 @@ pub struct ShapeSpec {
     pub seed: u64,
     /// Marching-cubes grid resolution per axis.
     pub resolution: usize,
+    /// Gaussian noise added to the mixed latent, in training standard deviations per
+    /// dimension, drawn from `seed` (0 = the plain convex combination).
+    #[serde(default)]
+    pub latent_noise: f64,
 }
 
 /// One generated shape.
@@ -87,6 +93,9 @@ pub trait CohortEngine: Send + Sync + 'static {
     /// Facts about the model stored in `model_dir` (used for validation and the API).
     fn model_info(&self, model_dir: &Path) -> anyhow::Result<ModelInfo>;
 
+    /// The model's training latents, in index order (for spread selection).
+    fn training_latents(&self, model_dir: &Path) -> anyhow::Result<Vec<Vec<f32>>>;
+
     /// Generates one shape. Returns early with an error once `cancel` becomes true.
     fn generate_shape(
         &self,
@@ -94,6 +103,16 @@ pub trait CohortEngine: Send + Sync + 'static {
         spec: &ShapeSpec,
         cancel: &AtomicBool,
     ) -> anyhow::Result<GeneratedShape>;
+
+    /// The model's training surfaces at `resolution` (unit-ball coordinates), sampled and
+    /// indexed to measure generated shapes' novelty against. Built once per model and
+    /// resolution and cached; returns early with an error once `cancel` becomes true.
+    fn novelty_reference(
+        &self,
+        model_dir: &Path,
+        resolution: usize,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<Arc<NoveltyReference>>;
 
     /// Pairwise Chamfer distance matrix (unit-ball coordinates) over a cohort's meshes.
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>>;
@@ -126,12 +145,25 @@ impl CohortEngine for UnavailableEngine {
         self.refuse()
     }
 
+    fn training_latents(&self, _: &Path) -> anyhow::Result<Vec<Vec<f32>>> {
+        self.refuse()
+    }
+
     fn generate_shape(
         &self,
         _: &Path,
         _: &ShapeSpec,
         _: &AtomicBool,
     ) -> anyhow::Result<GeneratedShape> {
+        self.refuse()
+    }
+
+    fn novelty_reference(
+        &self,
+        _: &Path,
+        _: usize,
+        _: &AtomicBool,
+    ) -> anyhow::Result<Arc<NoveltyReference>> {
         self.refuse()
     }
 

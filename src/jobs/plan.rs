@@ -2,11 +2,14 @@
 //! mixes and with which weights, all derived from the cohort seed so a cohort can be
 //! replayed bit for bit.
 
+use std::sync::Arc;
+
 use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::engine::ShapeSpec;
+use crate::sdf::generate::{Selection, attempt_seed, select_spread};
 
 /// Tolerance on the sum of explicit weights (DESIGN §4).
 pub const WEIGHT_SUM_TOLERANCE: f64 = 1e-6;
@@ -55,15 +58,31 @@ pub struct CohortPlan {
     pub seed: u64,
     /// Marching-cubes resolution.
     pub resolution: usize,
+    /// How the training latents are picked.
+    pub selection: Selection,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: f64,
+    /// The training latents (needed by [`Selection::Spread`] only).
+    pub latents: Option<Arc<Vec<Vec<f32>>>>,
 }
 
 impl CohortPlan {
     /// The specification of shape `index`; depends only on the plan and the index, so a
     /// resumed job regenerates exactly what an uninterrupted one would have.
     pub fn shape_spec(&self, index: u64) -> ShapeSpec {
-        let seed = shape_seed(self.seed, index);
+        self.shape_spec_attempt(index, 0)
+    }
+
+    /// Draw `attempt` of shape `index` (later draws replace shapes too close to a training
+    /// shape); its seed derives from the shape seed and the attempt, draw 0 is
+    /// [`Self::shape_spec`].
+    pub fn shape_spec_attempt(&self, index: u64, attempt: u32) -> ShapeSpec {
+        let seed = attempt_seed(shape_seed(self.seed, index), attempt);
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let training_indices = choose_distinct(&mut rng, self.training_shapes, self.arity);
+        let training_indices = match (self.selection, &self.latents) {
+            (Selection::Spread, Some(latents)) => select_spread(&mut rng, latents, self.arity),
+            _ => choose_distinct(&mut rng, self.training_shapes, self.arity),
+        };
         let weights = match (&self.weights, self.weighting) {
             (Some(w), _) => w.clone(),
             (None, Weighting::Equal) => vec![1.0 / self.arity as f64; self.arity],
@@ -74,6 +93,7 @@ impl CohortPlan {
             weights,
             seed,
             resolution: self.resolution,
+            latent_noise: self.latent_noise,
         }
     }
 }
@@ -147,7 +167,42 @@ mod tests {
             weighting,
             seed: 42,
             resolution: 64,
+            selection: Selection::Uniform,
+            latent_noise: 0.0,
+            latents: None,
         }
+    }
+
+    #[test]
+    fn redraws_have_their_own_seeds_and_spread_uses_the_latents() {
+        let p = plan(Weighting::Dirichlet);
+        assert_eq!(p.shape_spec_attempt(5, 0), p.shape_spec(5));
+        let first = p.shape_spec_attempt(5, 0);
+        let second = p.shape_spec_attempt(5, 1);
+        assert_ne!(first.seed, second.seed);
+        assert_eq!(second, p.shape_spec_attempt(5, 1));
+        // Latents 0–7 coincide at the origin, 8 and 9 lie far away: a spread pair always
+        // contains one of the far ones, a uniform pair often does not.
+        let mut latents = vec![vec![0.0f32; 2]; 10];
+        latents[8] = vec![5.0, 0.0];
+        latents[9] = vec![0.0, 5.0];
+        let spread = CohortPlan {
+            arity: 2,
+            selection: Selection::Spread,
+            latents: Some(Arc::new(latents)),
+            ..p.clone()
+        };
+        let uniform = CohortPlan {
+            arity: 2,
+            ..p.clone()
+        };
+        let far = |plan: &CohortPlan| {
+            (0..100)
+                .filter(|&i| plan.shape_spec(i).training_indices.iter().any(|&j| j >= 8))
+                .count()
+        };
+        assert_eq!(far(&spread), 100);
+        assert!(far(&uniform) < 60, "{}", far(&uniform));
     }
 
     #[test]

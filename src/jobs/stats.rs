@@ -1,4 +1,5 @@
-//! Summary statistics of a cohort's pairwise Chamfer distances (the diversity figure).
+//! Summary statistics of a cohort's pairwise Chamfer distances (the diversity figure) and
+//! of per-shape values (novelty, anatomical measurements).
 
 use serde::{Deserialize, Serialize};
 
@@ -48,12 +49,46 @@ pub struct Histogram {
     pub counts: Vec<usize>,
 }
 
+/// Statistics over one value per shape.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct ValueSummary {
+    /// Number of values (shapes with the value).
+    pub count: usize,
+    /// Mean.
+    pub mean: f64,
+    /// Sample standard deviation (n−1 denominator; 0 for a single value).
+    pub std: f64,
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
+    /// Quantiles by linear interpolation between order statistics.
+    pub quantiles: Quantiles,
+    /// Equal-width histogram over [min, max].
+    pub histogram: Histogram,
+}
+
 /// Summarises the upper triangle of `matrix`; None when there is no pair.
 pub fn summarize(matrix: &[Vec<f64>]) -> Option<PairwiseSummary> {
-    let mut values: Vec<f64> = (0..matrix.len())
+    let values: Vec<f64> = (0..matrix.len())
         .flat_map(|i| (i + 1..matrix.len()).map(move |j| (i, j)))
         .map(|(i, j)| matrix[i][j])
         .collect();
+    let s = summarize_values(values)?;
+    Some(PairwiseSummary {
+        pairs: s.count,
+        mean: s.mean,
+        std: s.std,
+        min: s.min,
+        max: s.max,
+        quantiles: s.quantiles,
+        histogram: s.histogram,
+    })
+}
+
+/// Summarises a list of values (non-finite ones are dropped); None when none is left.
+pub fn summarize_values(mut values: Vec<f64>) -> Option<ValueSummary> {
+    values.retain(|v| v.is_finite());
     if values.is_empty() {
         return None;
     }
@@ -66,8 +101,8 @@ pub fn summarize(matrix: &[Vec<f64>]) -> Option<PairwiseSummary> {
         0.0
     };
     let q = |p: f64| quantile_sorted(&values, p);
-    Some(PairwiseSummary {
-        pairs: n,
+    Some(ValueSummary {
+        count: n,
         mean,
         std: var.sqrt(),
         min: values[0],
@@ -130,6 +165,14 @@ mod tests {
         assert_eq!(s.histogram.counts[0], 1);
         assert_eq!(s.histogram.counts[HISTOGRAM_BINS - 1], 1);
         assert_eq!(s.histogram.edges.len(), HISTOGRAM_BINS + 1);
+    }
+
+    #[test]
+    fn value_summaries_drop_non_finite_values() {
+        let s = summarize_values(vec![3.0, f64::NAN, 1.0, 2.0]).unwrap();
+        assert_eq!((s.count, s.min, s.max, s.mean), (3, 1.0, 3.0, 2.0));
+        assert_eq!(s.quantiles.p50, 2.0);
+        assert_eq!(summarize_values(vec![f64::INFINITY]), None);
     }
 
     #[test]

@@ -10,6 +10,7 @@
 use rand::RngExt;
 use rand::seq::index;
 use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
 use super::manifest::SIGN_CONVENTION;
@@ -29,6 +30,191 @@ pub enum Weighting {
     Equal,
     /// α ~ Dirichlet(1, …, 1), uniform on the simplex, drawn from the seed.
     Dirichlet,
+}
+
+/// How the `k` training latents of a generated shape are picked.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    clap::ValueEnum,
+    utoipa::ToSchema,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Selection {
+    /// k distinct training shapes, uniformly at random.
+    #[default]
+    Uniform,
+    /// Variance-aware, k-means++ style: the first with probability ∝ its squared distance
+    /// to the mean latent, each next ∝ its smallest squared distance to those already
+    /// chosen, so mixtures combine dissimilar shapes and spread over the latent space.
+    Spread,
+}
+
+impl Selection {
+    /// The stored name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Uniform => "uniform",
+            Self::Spread => "spread",
+        }
+    }
+
+    /// Parses a stored name.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "uniform" => Some(Self::Uniform),
+            "spread" => Some(Self::Spread),
+            _ => None,
+        }
+    }
+
+    /// `k` distinct indices of `latents` picked by this strategy.
+    pub fn pick(self, rng: &mut ChaCha8Rng, latents: &[Vec<f32>], k: usize) -> Vec<usize> {
+        match self {
+            Self::Uniform => index::sample(rng, latents.len(), k.min(latents.len())).into_vec(),
+            Self::Spread => select_spread(rng, latents, k),
+        }
+    }
+}
+
+fn squared_distance(a: &[f32], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| (f64::from(x) - y).powi(2))
+        .sum()
+}
+
+/// Draws an index with probability ∝ `weights`; uniform over the `eligible` ones when every
+/// weight is zero (all remaining latents coincide with chosen ones).
+fn draw_weighted(rng: &mut ChaCha8Rng, weights: &[f64], eligible: &[bool]) -> usize {
+    let total: f64 = weights.iter().sum();
+    if total > 0.0 && total.is_finite() {
+        let mut target = rng.random::<f64>() * total;
+        let mut last = 0;
+        for (i, &w) in weights.iter().enumerate() {
+            if w > 0.0 {
+                last = i;
+                if target < w {
+                    return i;
+                }
+                target -= w;
+            }
+        }
+        return last;
+    }
+    let open: Vec<usize> = (0..eligible.len()).filter(|&i| eligible[i]).collect();
+    open[rng.random_range(0..open.len())]
+}
+
+/// k-means++ style selection of `k` distinct latents (see [`Selection::Spread`]).
+pub fn select_spread(rng: &mut ChaCha8Rng, latents: &[Vec<f32>], k: usize) -> Vec<usize> {
+    let n = latents.len();
+    let k = k.min(n);
+    if k == 0 {
+        return Vec::new();
+    }
+    let dim = latents[0].len();
+    let mut mean = vec![0.0f64; dim];
+    for z in latents {
+        for (m, &v) in mean.iter_mut().zip(z) {
+            *m += f64::from(v) / n as f64;
+        }
+    }
+    let mut weights: Vec<f64> = latents.iter().map(|z| squared_distance(z, &mean)).collect();
+    let mut eligible = vec![true; n];
+    let mut chosen = Vec::with_capacity(k);
+    while chosen.len() < k {
+        let pick = draw_weighted(rng, &weights, &eligible);
+        chosen.push(pick);
+        eligible[pick] = false;
+        let centre: Vec<f64> = latents[pick].iter().map(|&v| f64::from(v)).collect();
+        for (i, w) in weights.iter_mut().enumerate() {
+            *w = if eligible[i] {
+                let d = squared_distance(&latents[i], &centre);
+                if chosen.len() == 1 { d } else { w.min(d) }
+            } else {
+                0.0
+            };
+        }
+    }
+    chosen
+}
+
+/// Per-dimension sample standard deviation of the training latents (0 for one latent).
+pub fn latent_std(latents: &[Vec<f32>]) -> Vec<f64> {
+    let n = latents.len();
+    let dim = latents.first().map_or(0, Vec::len);
+    if n < 2 {
+        return vec![0.0; dim];
+    }
+    (0..dim)
+        .map(|d| {
+            let mean = latents.iter().map(|z| f64::from(z[d])).sum::<f64>() / n as f64;
+            let var = latents
+                .iter()
+                .map(|z| (f64::from(z[d]) - mean).powi(2))
+                .sum::<f64>()
+                / (n - 1) as f64;
+            var.sqrt()
+        })
+        .collect()
+}
+
+/// Stream tag of the latent-noise draws.
+const NOISE_STREAM: u64 = 0x4e4f_4953;
+
+/// The mixed latent of `mixture` plus Gaussian noise of `noise` training standard
+/// deviations per dimension, drawn from `seed`. With `noise` = 0 it is exactly
+/// [`Mixture::mix_latents`], so cohorts without noise are unchanged.
+pub fn noisy_latent(mixture: &Mixture, latents: &[Vec<f32>], noise: f64, seed: u64) -> Vec<f32> {
+    if noise == 0.0 {
+        return mixture.mix_latents(latents);
+    }
+    let std = latent_std(latents);
+    let mut rng = super::batch::stream_rng(seed, 0, 0, NOISE_STREAM);
+    let dim = std.len();
+    let mut z = vec![0.0f64; dim];
+    for (&i, &w) in mixture.indices.iter().zip(&mixture.weights) {
+        for (acc, &v) in z.iter_mut().zip(&latents[i]) {
+            *acc += w * f64::from(v);
+        }
+    }
+    for (acc, s) in z.iter_mut().zip(std) {
+        let g: f64 = rng.sample(StandardNormal);
+        *acc += noise * s * g;
+    }
+    z.into_iter().map(|v| v as f32).collect()
+}
+
+/// Diversity controls of a cohort: how latents are picked and how much noise is added.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Diversity {
+    /// Selection of the mixed training latents.
+    pub selection: Selection,
+    /// Gaussian latent noise in training standard deviations (≥ 0).
+    pub latent_noise: f64,
+}
+
+/// Most redraws of a shape that is closer than the requested novelty to a training shape.
+pub const MAX_REDRAWS: u32 = 10;
+
+/// The seed of draw `attempt` of a shape whose first draw uses `seed`: the seed itself for
+/// the first draw, a SplitMix64 mix of both afterwards.
+pub fn attempt_seed(seed: u64, attempt: u32) -> u64 {
+    if attempt == 0 {
+        return seed;
+    }
+    let mut z = seed ^ u64::from(attempt).wrapping_mul(0xD1B5_4A32_D192_ED03);
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
 }
 
 /// The mixing part of a cohort request.
@@ -151,6 +337,31 @@ impl MixSpec {
         };
         Ok(Mixture { indices, weights })
     }
+
+    /// The mixture of draw `attempt` of cohort shape `shape` with `selection`; draw 0 with
+    /// uniform selection is exactly [`Self::mixture`].
+    pub fn mixture_with(
+        &self,
+        latents: &[Vec<f32>],
+        selection: Selection,
+        seed: u64,
+        shape: u64,
+        attempt: u32,
+    ) -> Result<Mixture, CohortSpecError> {
+        self.validate(latents.len())?;
+        let mut rng = if attempt == 0 {
+            mixture_rng(seed, shape)
+        } else {
+            super::batch::stream_rng(seed, shape, u64::from(attempt), 0x4d49_5845)
+        };
+        let indices = selection.pick(&mut rng, latents, self.arity);
+        let weights = match (&self.weights, self.weighting) {
+            (Some(w), _) => w.clone(),
+            (None, Weighting::Equal) => vec![1.0 / self.arity as f64; self.arity],
+            (None, Weighting::Dirichlet) => dirichlet_ones(&mut rng, self.arity),
+        };
+        Ok(Mixture { indices, weights })
+    }
 }
 
 /// Which training shapes a generated shape combines, and how much of each.
@@ -259,11 +470,32 @@ pub fn generate_shape(
     resolution: usize,
     extraction: ExtractionMethod,
 ) -> Result<GeneratedShape, GenerateError> {
-    let mixture = spec.mixture(latents.len(), seed, shape)?;
+    generate_shape_with(
+        model,
+        latents,
+        spec,
+        Diversity::default(),
+        (seed, shape, 0),
+        resolution,
+        extraction,
+    )
+}
+
+/// [`generate_shape`] with diversity controls, for draw `attempt` of `(seed, shape, attempt)`.
+pub fn generate_shape_with(
+    model: &LoadedModel,
+    latents: &[Vec<f32>],
+    spec: &MixSpec,
+    diversity: Diversity,
+    (seed, shape, attempt): (u64, u64, u32),
+    resolution: usize,
+    extraction: ExtractionMethod,
+) -> Result<GeneratedShape, GenerateError> {
+    let mixture = spec.mixture_with(latents, diversity.selection, seed, shape, attempt)?;
     let transform = mixture.mix_transforms(&model.manifest.transforms())?;
-    let field = model
-        .field(&mixture.mix_latents(latents))
-        .map_err(ReconstructError::from)?;
+    let noise_seed = attempt_seed(seed ^ shape.rotate_left(32), attempt);
+    let latent = noisy_latent(&mixture, latents, diversity.latent_noise, noise_seed);
+    let field = model.field(&latent).map_err(ReconstructError::from)?;
     let mesh = reconstruct(&field, resolution, extraction)?.mesh;
     Ok(GeneratedShape {
         mixture,
@@ -299,6 +531,25 @@ pub struct Provenance {
     pub sign_convention: String,
     /// Blended unit-ball transform.
     pub transform: UnitBallTransform,
+    /// How the training latents were picked.
+    #[serde(default)]
+    pub selection: Selection,
+    /// Latent noise in training standard deviations.
+    #[serde(default)]
+    pub latent_noise: f64,
+    /// Which draw was kept (0 = the first; later ones replace draws too close to a
+    /// training shape).
+    #[serde(default)]
+    pub attempt: u32,
+    /// Distance to the nearest training shape (the model's reconstruction of it), if measured.
+    #[serde(default)]
+    pub novelty: Option<super::novelty::Novelty>,
+    /// Draws rejected as closer than the requested minimum novelty.
+    #[serde(default)]
+    pub redraws: u32,
+    /// False when no draw reached the requested minimum novelty (the most novel was kept).
+    #[serde(default)]
+    pub novelty_met: Option<bool>,
 }
 
 impl Provenance {
@@ -330,6 +581,149 @@ impl Provenance {
             units: units.to_string(),
             sign_convention: SIGN_CONVENTION.to_string(),
             transform: generated.transform,
+            selection: Selection::Uniform,
+            latent_noise: 0.0,
+            attempt: 0,
+            novelty: None,
+            redraws: 0,
+            novelty_met: None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// 20 latents in 4 dimensions: a tight cluster of 16 around the origin and 4 outliers.
+    fn clustered_latents() -> Vec<Vec<f32>> {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut latents: Vec<Vec<f32>> = (0..16)
+            .map(|_| (0..4).map(|_| rng.random::<f32>() * 0.1).collect())
+            .collect();
+        for d in 0..4 {
+            let mut z = vec![0.0; 4];
+            z[d] = 3.0;
+            latents.push(z);
+        }
+        latents
+    }
+
+    fn distance(a: &[f32], b: &[f32]) -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| f64::from(x - y).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    fn mixture() -> Mixture {
+        Mixture {
+            indices: vec![1, 17, 4],
+            weights: vec![0.2, 0.5, 0.3],
+        }
+    }
+
+    #[test]
+    fn zero_noise_reproduces_the_plain_mixed_latent_bit_for_bit() {
+        let latents = clustered_latents();
+        let m = mixture();
+        for seed in 0..20 {
+            assert_eq!(
+                noisy_latent(&m, &latents, 0.0, seed),
+                m.mix_latents(&latents)
+            );
+        }
+        let spec = MixSpec {
+            arity: 3,
+            weights: None,
+            weighting: Weighting::Dirichlet,
+        };
+        for shape in 0..20 {
+            assert_eq!(
+                spec.mixture_with(&latents, Selection::Uniform, 9, shape, 0),
+                spec.mixture(latents.len(), 9, shape)
+            );
+        }
+    }
+
+    #[test]
+    fn noise_has_the_requested_scale_per_dimension() {
+        let latents = clustered_latents();
+        let std = latent_std(&latents);
+        let m = mixture();
+        let base = m.mix_latents(&latents);
+        let (scale, draws) = (0.5, 4000);
+        let mut sum = [0.0f64; 4];
+        let mut sum_sq = [0.0f64; 4];
+        for seed in 0..draws {
+            let z = noisy_latent(&m, &latents, scale, seed);
+            assert_eq!(z, noisy_latent(&m, &latents, scale, seed), "deterministic");
+            for d in 0..4 {
+                let e = f64::from(z[d] - base[d]) / (scale * std[d]);
+                sum[d] += e;
+                sum_sq[d] += e * e;
+            }
+        }
+        for d in 0..4 {
+            let mean = sum[d] / draws as f64;
+            let var = sum_sq[d] / draws as f64 - mean * mean;
+            // Standard normal: the mean's standard error is 1/√4000 ≈ 0.016, the variance's
+            // ≈ √(2/4000) ≈ 0.022.
+            assert!(mean.abs() < 0.06, "dimension {d}: mean {mean}");
+            assert!((var - 1.0).abs() < 0.09, "dimension {d}: variance {var}");
+        }
+    }
+
+    #[test]
+    fn spread_selection_picks_farther_apart_latents_than_uniform() {
+        let latents = clustered_latents();
+        let mean_pair_distance = |selection: Selection| {
+            let (mut total, mut pairs) = (0.0, 0);
+            for seed in 0..500 {
+                let mut rng = mixture_rng(seed, 0);
+                let picked = selection.pick(&mut rng, &latents, 3);
+                let mut sorted = picked.clone();
+                sorted.sort_unstable();
+                sorted.dedup();
+                assert_eq!(
+                    sorted.len(),
+                    3,
+                    "{selection:?} repeated an index: {picked:?}"
+                );
+                for i in 0..3 {
+                    for j in i + 1..3 {
+                        total += distance(&latents[picked[i]], &latents[picked[j]]);
+                        pairs += 1;
+                    }
+                }
+            }
+            total / f64::from(pairs)
+        };
+        let uniform = mean_pair_distance(Selection::Uniform);
+        let spread = mean_pair_distance(Selection::Spread);
+        assert!(
+            spread > 1.5 * uniform,
+            "spread {spread} vs uniform {uniform}"
+        );
+    }
+
+    #[test]
+    fn spread_selection_handles_coincident_latents() {
+        let latents = vec![vec![1.0f32, 1.0]; 5];
+        let mut rng = mixture_rng(1, 2);
+        let mut picked = select_spread(&mut rng, &latents, 4);
+        picked.sort_unstable();
+        picked.dedup();
+        assert_eq!(picked.len(), 4);
+    }
+
+    #[test]
+    fn attempt_seeds_differ_and_keep_the_first() {
+        assert_eq!(attempt_seed(77, 0), 77);
+        let seeds: std::collections::HashSet<u64> =
+            (0..=MAX_REDRAWS).map(|a| attempt_seed(77, a)).collect();
+        assert_eq!(seeds.len(), MAX_REDRAWS as usize + 1);
     }
 }

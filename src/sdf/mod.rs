@@ -33,6 +33,7 @@ pub mod data;
 pub mod evaluation;
 pub mod generate;
 pub mod manifest;
+pub mod novelty;
 pub mod reconstruct;
 pub mod store;
 pub mod training;

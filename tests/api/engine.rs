@@ -3,6 +3,7 @@
 //! as a UV sphere. Exact expectations (bounding box, area, mixing) follow from that.
 
 use std::path::Path;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
@@ -12,9 +13,13 @@ use aortagen::geometry::normalize::UnitBallTransform;
 use aortagen::jobs::engine::{
     CohortEngine, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo, TrainingSpec,
 };
+use aortagen::sdf::generate::{Mixture, noisy_latent};
+use aortagen::sdf::novelty::NoveltyReference;
 
 /// Number of training ellipsoids.
 pub const TRAINING_SHAPES: usize = 5;
+/// Surface samples per shape for novelty (small, so tests stay quick).
+pub const NOVELTY_POINTS: usize = 2000;
 /// Where every generated shape is centred, in mm.
 pub const CENTRE_MM: [f64; 3] = [100.0, -50.0, 20.0];
 
@@ -33,6 +38,13 @@ pub fn mixed_axes(indices: &[usize], weights: &[f64]) -> [f64; 3] {
         }
     }
     axes
+}
+
+/// The latents of the analytic model: the training ellipsoids' semi-axes.
+pub fn training_latents() -> Vec<Vec<f32>> {
+    (0..TRAINING_SHAPES)
+        .map(|i| training_axes(i).iter().map(|&a| a as f32).collect())
+        .collect()
 }
 
 /// The analytic engine, with hooks to hold or break generation at a given call.
@@ -63,6 +75,10 @@ impl CohortEngine for AnalyticEngine {
         })
     }
 
+    fn training_latents(&self, _: &Path) -> anyhow::Result<Vec<Vec<f32>>> {
+        Ok(training_latents())
+    }
+
     fn generate_shape(
         &self,
         _: &Path,
@@ -79,15 +95,18 @@ impl CohortEngine for AnalyticEngine {
             }
         }
         anyhow::ensure!(!cancel.load(Ordering::SeqCst), "generation cancelled");
-        let axes = mixed_axes(&spec.training_indices, &spec.weights);
+        let axes = if spec.latent_noise == 0.0 {
+            mixed_axes(&spec.training_indices, &spec.weights)
+        } else {
+            let mixture = Mixture {
+                indices: spec.training_indices.clone(),
+                weights: spec.weights.clone(),
+            };
+            let z = noisy_latent(&mixture, &training_latents(), spec.latent_noise, spec.seed);
+            [0, 1, 2].map(|d| f64::from(z[d]).max(1.0))
+        };
         let radius = axes.iter().cloned().fold(0.0, f64::max);
-        let mut mesh = uv_sphere(8, 16);
-        for p in &mut mesh.positions {
-            for (c, a) in p.iter_mut().zip(axes) {
-                *c = (*c as f64 * a / radius) as f32;
-            }
-        }
-        mesh.normals = Some(mesh.compute_vertex_normals());
+        let mesh = ellipsoid_unit(axes, radius);
         let area_mm2 = mesh.area() * radius.powi(2);
         let volume_mm3 = mesh.signed_volume() * radius.powi(3);
         Ok(GeneratedShape {
@@ -99,6 +118,21 @@ impl CohortEngine for AnalyticEngine {
             area_mm2,
             volume_mm3,
         })
+    }
+
+    fn novelty_reference(
+        &self,
+        _: &Path,
+        _: usize,
+        _: &AtomicBool,
+    ) -> anyhow::Result<Arc<NoveltyReference>> {
+        let surfaces: Vec<TriMesh> = (0..TRAINING_SHAPES)
+            .map(|i| {
+                let axes = training_axes(i);
+                ellipsoid_unit(axes, axes.iter().cloned().fold(0.0, f64::max))
+            })
+            .collect();
+        Ok(Arc::new(NoveltyReference::new(&surfaces, NOVELTY_POINTS)?))
     }
 
     fn pairwise_chamfer(&self, meshes: &[TriMesh], _: u64) -> anyhow::Result<Vec<Vec<f64>>> {
@@ -124,6 +158,18 @@ impl CohortEngine for AnalyticEngine {
         info.training_shapes.truncate(files);
         Ok(info)
     }
+}
+
+/// The ellipsoid with semi-axes `axes` (mm) in the unit ball of scale `radius`, with normals.
+pub fn ellipsoid_unit(axes: [f64; 3], radius: f64) -> TriMesh {
+    let mut mesh = uv_sphere(8, 16);
+    for p in &mut mesh.positions {
+        for (c, a) in p.iter_mut().zip(axes) {
+            *c = (*c as f64 * a / radius) as f32;
+        }
+    }
+    mesh.normals = Some(mesh.compute_vertex_normals());
+    mesh
 }
 
 /// A unit sphere with `rings` latitude bands and `segments` meridians; outward,

@@ -11,5 +11,6 @@ mod limits;
 mod models;
 mod openapi;
 mod reports;
+mod science;
 mod shapes;
 mod storage;

@@ -10,6 +10,7 @@ use crate::http::jobs::Progress;
 use crate::jobs::engine::ModelInfo;
 use crate::jobs::plan::{Weighting, check_weights};
 use crate::jobs::stats::PairwiseSummary;
+use crate::sdf::generate::Selection;
 
 /// Default marching-cubes resolution (the paper's 256³).
 pub const DEFAULT_RESOLUTION: i64 = 256;
@@ -39,6 +40,19 @@ pub struct CreateCohort {
     /// Marching-cubes resolution per axis, 32–1024 (default 256).
     #[serde(default)]
     pub resolution: Option<i64>,
+    /// Gaussian noise added to each mixed latent, in units of the training latents'
+    /// per-dimension standard deviation; ≥ 0, default 0 (plain convex combinations).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latent_noise: Option<f64>,
+    /// How the `arity` training latents are picked: `uniform` (default) or `spread`
+    /// (k-means++ style: far from the mean and from each other).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub selection: Option<Selection>,
+    /// Smallest accepted Chamfer distance (unit-ball coordinates) to the nearest training
+    /// shape, ≥ 0. A closer shape is redrawn up to 10 times; if no draw reaches it the most
+    /// novel draw is kept and flagged `novelty_met: false`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_novelty: Option<f64>,
 }
 
 impl CreateCohort {
@@ -71,6 +85,15 @@ impl CreateCohort {
         }
         if let Some(w) = &self.weights {
             check_weights(w, self.arity as usize).map_err(|m| weights_error(&m))?;
+        }
+        for (field, value) in [
+            ("latent_noise", self.latent_noise),
+            ("min_novelty", self.min_novelty),
+        ] {
+            if let Some(v) = value.filter(|v| !(v.is_finite() && *v >= 0.0)) {
+                let msg = format!("must be a finite number ≥ 0, got {v}");
+                return Err(ApiError::invalid(field, "non-negative", msg));
+            }
         }
         Ok(())
     }
@@ -131,6 +154,14 @@ pub struct CohortView {
     pub seed: u64,
     /// Marching-cubes resolution.
     pub resolution: i64,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: f64,
+    /// How the mixed training latents are picked.
+    pub selection: Selection,
+    /// Smallest accepted Chamfer distance to a training shape, if any.
+    pub min_novelty: Option<f64>,
+    /// Redraws over the stored shapes (shapes closer than `min_novelty` to a training shape).
+    pub redraws_total: i64,
     /// The job generating it.
     pub job_id: i64,
     /// Error chain when failed.
@@ -202,6 +233,10 @@ impl CohortView {
             weights: c.weights.and_then(|w| serde_json::from_str(&w).ok()),
             seed: c.seed as u64,
             resolution: c.resolution,
+            latent_noise: c.latent_noise,
+            selection: Selection::parse(&c.selection).unwrap_or_default(),
+            min_novelty: c.min_novelty,
+            redraws_total: c.redraws_total,
             job_id: c.job_id,
             error: c.error,
             created_at: c.created_at,

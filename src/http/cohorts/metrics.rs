@@ -9,11 +9,12 @@ use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
+use crate::anatomy::shape::ShapeAnatomy;
 use crate::db;
 use crate::http::AppState;
 use crate::http::error::{ApiError, Problem, Result};
 use crate::http::extract::{ApiQuery, parse_id};
-use crate::jobs::stats::PairwiseSummary;
+use crate::jobs::stats::{PairwiseSummary, ValueSummary, summarize_values};
 
 /// Options of the metrics endpoint.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
@@ -41,7 +42,52 @@ pub struct CohortMetrics {
     pub matrix: Option<Vec<Vec<f64>>>,
     /// When it was computed.
     pub computed_at: String,
+    /// Distances of the shapes to their nearest training shapes.
+    pub novelty: NoveltyMetrics,
+    /// Anatomical measurements over the shapes (mm).
+    pub anatomy: AnatomyMetrics,
 }
+
+/// Per-measurement statistics over a cohort's measured shapes, in mm; a summary is null
+/// when no shape has that measurement (the root landmarks need a root-shaped surface).
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct AnatomyMetrics {
+    /// Shapes measured (as a root or a vessel).
+    pub measured: i64,
+    /// Shapes measured with the aortic-root landmarks.
+    pub roots: i64,
+    /// Shapes that could not be measured.
+    pub failed: i64,
+    /// Annulus diameter (mean of major and minor).
+    pub annulus_mm: Option<ValueSummary>,
+    /// Sinus of Valsalva diameter.
+    pub sinus_mm: Option<ValueSummary>,
+    /// Sinotubular junction diameter.
+    pub stj_mm: Option<ValueSummary>,
+    /// Sinus height.
+    pub sinus_height_mm: Option<ValueSummary>,
+    /// Centreline length.
+    pub length_mm: Option<ValueSummary>,
+}
+
+/// Novelty of a cohort's shapes against the model's training shapes.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct NoveltyMetrics {
+    /// What the numbers are.
+    pub measure: &'static str,
+    /// The cohort's minimum, if it set one.
+    pub min_novelty: Option<f64>,
+    /// Statistics over the shapes' distances (null without shapes).
+    pub summary: Option<ValueSummary>,
+    /// Draws rejected over all shapes.
+    pub redraws_total: i64,
+    /// Shapes kept although no draw reached `min_novelty`.
+    pub not_met: i64,
+    /// How many shapes have each training shape as their nearest (index → count).
+    pub nearest_training_counts: Vec<i64>,
+}
+
+const NOVELTY_MEASURE: &str = "Chamfer distance to the nearest training shape (the model's reconstruction of its latent), unit-ball coordinates";
 
 const MEASURE: &str = "Chamfer distance (sum of both mean squared nearest-neighbour distances), unit-ball coordinates";
 
@@ -83,6 +129,14 @@ pub(super) async fn get_cohort_metrics(
         .into_iter()
         .map(|s| s.shape_id)
         .collect();
+    let science = db::shapes::cohort_science(&state.pool, cohort.cohort_id).await?;
+    let training_shapes = match db::models::get(&state.pool, &cohort.model_id).await? {
+        Some(model) => serde_json::from_str::<crate::jobs::engine::ModelInfo>(&model.manifest)
+            .map_err(anyhow::Error::from)?
+            .training_shape_count(),
+        None => 0,
+    };
+    let novelty = novelty_metrics(&cohort, &science, training_shapes);
     let with_matrix = q.matrix.unwrap_or(false);
     if csv {
         let body = if with_matrix {
@@ -99,8 +153,57 @@ pub(super) async fn get_cohort_metrics(
         summary,
         matrix: with_matrix.then_some(matrix),
         computed_at: row.created_at,
+        novelty,
+        anatomy: anatomy_metrics(&science).map_err(anyhow::Error::from)?,
     })
     .into_response())
+}
+
+fn novelty_metrics(
+    cohort: &db::cohorts::CohortRow,
+    shapes: &[db::shapes::ScienceRow],
+    training_shapes: usize,
+) -> NoveltyMetrics {
+    let mut counts = vec![0; training_shapes];
+    for i in shapes.iter().filter_map(|s| s.nearest_training_index) {
+        let i = i.max(0) as usize;
+        if counts.len() <= i {
+            counts.resize(i + 1, 0);
+        }
+        counts[i] += 1;
+    }
+    NoveltyMetrics {
+        measure: NOVELTY_MEASURE,
+        min_novelty: cohort.min_novelty,
+        summary: summarize_values(shapes.iter().filter_map(|s| s.novelty_cd).collect()),
+        redraws_total: shapes.iter().map(|s| s.redraws).sum(),
+        not_met: shapes
+            .iter()
+            .filter(|s| s.novelty_met == Some(false))
+            .count() as i64,
+        nearest_training_counts: counts,
+    }
+}
+
+fn anatomy_metrics(shapes: &[db::shapes::ScienceRow]) -> serde_json::Result<AnatomyMetrics> {
+    let measured: Vec<ShapeAnatomy> = shapes
+        .iter()
+        .filter_map(|s| s.anatomy.as_deref())
+        .map(serde_json::from_str)
+        .collect::<serde_json::Result<_>>()?;
+    let summary = |f: fn(&ShapeAnatomy) -> Option<f64>| {
+        summarize_values(measured.iter().filter_map(f).collect())
+    };
+    Ok(AnatomyMetrics {
+        measured: measured.len() as i64,
+        roots: measured.iter().filter(|a| a.method == "root").count() as i64,
+        failed: (shapes.len() - measured.len()) as i64,
+        annulus_mm: summary(|a| a.annulus_mm),
+        sinus_mm: summary(|a| a.sinus_mm),
+        stj_mm: summary(|a| a.stj_mm),
+        sinus_height_mm: summary(|a| a.sinus_height_mm),
+        length_mm: summary(|a| Some(a.length_mm)),
+    })
 }
 
 fn pairs_csv(ids: &[i64], m: &[Vec<f64>]) -> String {
