@@ -43,6 +43,7 @@ pub struct TrainingAccepted {
 #[utoipa::path(post, path = "/v1/models", tag = "models",
     request_body(content = ModelUpload, content_type = "multipart/form-data"),
     responses((status = 202, body = TrainingAccepted),
+              (status = 400, body = Problem, content_type = "application/problem+json", description = "Malformed multipart body"),
               (status = 409, body = Problem, content_type = "application/problem+json", description = "Id taken"),
               (status = 413, body = Problem, content_type = "application/problem+json"),
               (status = 415, body = Problem, content_type = "application/problem+json"),

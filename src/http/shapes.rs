@@ -134,6 +134,7 @@ pub struct ShapePage {
 #[utoipa::path(get, path = "/v1/cohorts/{id}/shapes", tag = "shapes",
     params(("id" = i64, Path, description = "Cohort id"), PageQuery),
     responses((status = 200, body = ShapePage),
+              (status = 400, body = Problem, content_type = "application/problem+json", description = "Bad limit or offset"),
               (status = 404, body = Problem, content_type = "application/problem+json")))]
 async fn list_cohort_shapes(
     State(state): State<AppState>,
@@ -179,7 +180,8 @@ pub struct MeshQuery {
 /// The shape's mesh. Content never changes for a shape id: strong ETag, immutable caching.
 #[utoipa::path(get, path = "/v1/shapes/{id}/mesh", tag = "shapes",
     params(("id" = i64, Path, description = "Shape id"), MeshQuery),
-    responses((status = 200, description = "The mesh (model/gltf-binary by default)", content_type = "model/gltf-binary"),
+    responses((status = 200, description = "The mesh in the requested format (model/gltf-binary by default)",
+               content(("model/gltf-binary"), ("model/gltf+json"), ("model/stl"), ("model/obj"), ("application/x-ply"))),
               (status = 304, description = "Matches If-None-Match"),
               (status = 400, body = Problem, content_type = "application/problem+json", description = "Unknown format or units"),
               (status = 404, body = Problem, content_type = "application/problem+json")))]
