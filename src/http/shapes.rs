@@ -269,7 +269,7 @@ async fn encode_mesh(
     let shape_id = shape.shape_id;
     let stored = db::shapes::get_mesh(&state.pool, shape_id)
         .await?
-        .ok_or_else(|| ApiError::not_found("shape", &shape_id.to_string()))?;
+        .ok_or_else(|| ApiError::not_found("shape", shape_id.to_string()))?;
     let view = ShapeView::from_row(shape)?;
     let meta = MeshMetadata {
         units: units.to_owned(),
