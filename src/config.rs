@@ -103,6 +103,10 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_MAX_ARCHIVE_BYTES", default_value_t = 1024 * 1024 * 1024)]
     pub max_archive_bytes: usize,
 
+    /// Memory for encoded mesh downloads kept for repeated requests, in bytes (0: none).
+    #[arg(long, env = "AORTAGEN_MESH_CACHE_BYTES", default_value_t = 64 * 1024 * 1024)]
+    pub mesh_cache_bytes: usize,
+
     /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to it.
     #[arg(long, env = "AORTAGEN_MODELS_DIR", default_value = "models")]
     pub models_dir: PathBuf,

@@ -14,6 +14,7 @@ use tokio::sync::{Notify, watch};
 use crate::config::Config;
 use crate::db;
 use crate::http::access::AccessPolicy;
+use crate::http::mesh_cache::MeshCache;
 use crate::http::{self, AppState};
 use crate::jobs::engine::CohortEngine;
 use crate::jobs::{JobContext, JobControls, worker};
@@ -81,8 +82,10 @@ impl Application {
             metrics: Arc::new(ServiceMetrics::default()),
             models_dir: config.models_dir.clone(),
         };
+        let mesh_cache = Arc::new(MeshCache::new(config.mesh_cache_bytes));
         let state = AppState {
             pool,
+            mesh_cache,
             config: Arc::new(config),
             jobs,
             job_wake: Arc::new(Notify::new()),

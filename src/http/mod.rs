@@ -8,6 +8,7 @@ pub mod extract;
 pub mod health;
 pub mod jobs;
 pub mod limits;
+pub mod mesh_cache;
 pub mod metrics;
 pub mod model_upload;
 pub mod models;
@@ -52,6 +53,8 @@ pub struct AppState {
     pub access: Arc<AccessPolicy>,
     /// Fault injection: makes the database refuse writes (tests of storage faults).
     pub read_only_switch: ReadOnlySwitch,
+    /// Encoded mesh downloads.
+    pub mesh_cache: Arc<mesh_cache::MeshCache>,
 }
 
 /// Every documented route, with its OpenAPI description.

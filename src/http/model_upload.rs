@@ -60,6 +60,7 @@ pub struct TrainingAccepted {
         (Vec<u8> = "application/zip")
     )),
     responses((status = 202, body = TrainingAccepted),
+              (status = 400, body = Problem, content_type = "application/problem+json", description = "Malformed multipart body"),
               (status = 409, body = Problem, content_type = "application/problem+json", description = "Id taken"),
               (status = 413, body = Problem, content_type = "application/problem+json"),
               (status = 415, body = Problem, content_type = "application/problem+json"),

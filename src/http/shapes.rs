@@ -2,6 +2,7 @@
 //! from the stored unit-ball mesh to the requested format and units.
 
 use axum::Json;
+use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -12,6 +13,7 @@ use super::AppState;
 use super::cohorts::{load as load_cohort, page};
 use super::error::{ApiError, Problem, Result};
 use super::extract::{ApiQuery, parse_id};
+use super::mesh_cache::MeshKey;
 use crate::anatomy::shape::ShapeAnatomy;
 use crate::db::{self, mesh_blob, shapes::ShapeRow};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
@@ -165,6 +167,7 @@ pub struct ShapePage {
 #[utoipa::path(get, path = "/v1/cohorts/{id}/shapes", tag = "shapes",
     params(("id" = i64, Path, description = "Cohort id"), PageQuery),
     responses((status = 200, body = ShapePage),
+              (status = 400, body = Problem, content_type = "application/problem+json", description = "Bad limit or offset"),
               (status = 404, body = Problem, content_type = "application/problem+json")))]
 async fn list_cohort_shapes(
     State(state): State<AppState>,
@@ -210,7 +213,8 @@ pub struct MeshQuery {
 /// The shape's mesh. Content never changes for a shape id: strong ETag, immutable caching.
 #[utoipa::path(get, path = "/v1/shapes/{id}/mesh", tag = "shapes",
     params(("id" = i64, Path, description = "Shape id"), MeshQuery),
-    responses((status = 200, description = "The mesh (model/gltf-binary by default)", content_type = "model/gltf-binary"),
+    responses((status = 200, description = "The mesh in the requested format (model/gltf-binary by default)",
+               content(("model/gltf-binary"), ("model/gltf+json"), ("model/stl"), ("model/obj"), ("application/x-ply"))),
               (status = 304, description = "Matches If-None-Match"),
               (status = 400, body = Problem, content_type = "application/problem+json", description = "Unknown format or units"),
               (status = 404, body = Problem, content_type = "application/problem+json")))]
@@ -254,9 +258,49 @@ async fn get_shape_mesh(
     if if_none_match(&headers, &etag) {
         return Ok((StatusCode::NOT_MODIFIED, cache).into_response());
     }
+    let key = MeshKey {
+        shape_id,
+        cohort_id: shape.cohort_id,
+        mesh_sha256: shape.mesh_sha256.clone(),
+        format: format.extension(),
+        units,
+    };
+    let bytes = match state.mesh_cache.get(&key) {
+        Some(bytes) => bytes,
+        None => {
+            let bytes = Bytes::from(encode_mesh(&state, shape, format, units).await?);
+            state.mesh_cache.insert(key, bytes.clone());
+            bytes
+        }
+    };
+    let disposition = format!(
+        "attachment; filename=\"shape-{shape_id}.{}\"",
+        format.extension()
+    );
+    let headers = [
+        (header::CONTENT_TYPE, content_type(format).to_owned()),
+        (header::CONTENT_DISPOSITION, disposition),
+    ];
+    Ok((cache, headers, bytes).into_response())
+}
+
+fn parse_json<T: serde::de::DeserializeOwned>(json: &str) -> Result<T> {
+    Ok(serde_json::from_str(json).map_err(anyhow::Error::from)?)
+}
+
+const CACHE_FOREVER: &str = "public, max-age=31536000, immutable";
+
+/// Reads the stored unit-ball mesh and writes it in `format` and `units`, off the executor.
+async fn encode_mesh(
+    state: &AppState,
+    shape: ShapeRow,
+    format: MeshFormat,
+    units: &'static str,
+) -> Result<Vec<u8>> {
+    let shape_id = shape.shape_id;
     let stored = db::shapes::get_mesh(&state.pool, shape_id)
         .await?
-        .ok_or_else(|| ApiError::not_found("shape", &id))?;
+        .ok_or_else(|| ApiError::not_found("shape", shape_id.to_string()))?;
     let view = ShapeView::from_row(shape)?;
     let meta = MeshMetadata {
         units: units.to_owned(),
@@ -279,22 +323,8 @@ async fn get_shape_mesh(
     })
     .await
     .map_err(anyhow::Error::from)??;
-    let disposition = format!(
-        "attachment; filename=\"shape-{shape_id}.{}\"",
-        format.extension()
-    );
-    let headers = [
-        (header::CONTENT_TYPE, content_type(format).to_owned()),
-        (header::CONTENT_DISPOSITION, disposition),
-    ];
-    Ok((cache, headers, bytes).into_response())
+    Ok(bytes)
 }
-
-fn parse_json<T: serde::de::DeserializeOwned>(json: &str) -> Result<T> {
-    Ok(serde_json::from_str(json).map_err(anyhow::Error::from)?)
-}
-
-const CACHE_FOREVER: &str = "public, max-age=31536000, immutable";
 
 fn content_type(format: MeshFormat) -> &'static str {
     match format {

@@ -3,6 +3,7 @@
 
 mod access;
 mod cohorts;
+mod conformance;
 mod engine;
 mod errors;
 mod helpers;

@@ -200,3 +200,23 @@ async fn cohort_metrics_hold_the_pairwise_chamfer_of_the_stored_meshes() {
     assert_eq!(text.lines().count(), 1 + 6);
     assert!(text.starts_with("shape_a,shape_b,chamfer\n"));
 }
+
+#[tokio::test]
+async fn a_repeated_download_is_served_from_memory_with_the_same_bytes() {
+    let app = spawn_app().await;
+    let (_, shapes) = finished_cohort(&app, 2).await;
+    let path = format!("/v1/shapes/{}/mesh", shapes[0]["id"]);
+    assert_eq!(app.state.mesh_cache.bytes(), 0);
+    let first = app.get(&path).await;
+    assert_eq!(first.status, StatusCode::OK);
+    assert_eq!(app.state.mesh_cache.bytes(), first.body.len());
+    let again = app.get(&path).await;
+    assert_eq!(again.body, first.body);
+    assert_eq!(again.header("etag"), first.header("etag"));
+    let stl = app.get(&format!("{path}?format=stl")).await;
+    assert_ne!(stl.body, first.body);
+    assert_eq!(
+        app.state.mesh_cache.bytes(),
+        first.body.len() + stl.body.len()
+    );
+}

@@ -94,7 +94,8 @@ const MEASURE: &str = "Chamfer distance (sum of both mean squared nearest-neighb
 /// Pairwise Chamfer distances among the cohort's shapes, computed after its meshes.
 #[utoipa::path(get, path = "/v1/cohorts/{id}/metrics", tag = "cohorts",
     params(("id" = i64, Path, description = "Cohort id"), MetricsQuery),
-    responses((status = 200, body = CohortMetrics, description = "JSON, or CSV (`text/csv`) with `format=csv`"),
+    responses((status = 200, description = "JSON, or CSV (`text/csv`) with `format=csv`",
+               content((CohortMetrics = "application/json"), ("text/csv"))),
               (status = 400, body = Problem, content_type = "application/problem+json"),
               (status = 404, body = Problem, content_type = "application/problem+json"),
               (status = 409, body = Problem, content_type = "application/problem+json", description = "Not computed yet")))]
