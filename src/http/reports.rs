@@ -11,6 +11,7 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extract::parse_id;
+use crate::anatomy::shape::ShapeAnatomy;
 use crate::db;
 use crate::db::cohorts::CohortRow;
 use crate::engine::read_evaluation;
@@ -20,7 +21,17 @@ use crate::report::{Report, Section, footer, render_html, sections};
 /// Plots of a model, by name.
 pub const MODEL_PLOTS: [&str; 1] = ["reconstruction-cd"];
 /// Plots of a cohort, by name.
-pub const COHORT_PLOTS: [&str; 3] = ["pairwise-cd", "area", "volume"];
+pub const COHORT_PLOTS: [&str; 9] = [
+    "pairwise-cd",
+    "novelty-cd",
+    "annulus",
+    "sinus",
+    "stj",
+    "sinus-height",
+    "length",
+    "area",
+    "volume",
+];
 
 pub(super) fn router() -> OpenApiRouter<AppState> {
     OpenApiRouter::new()
@@ -68,11 +79,13 @@ async fn model_report(State(state): State<AppState>, Path(id): Path<String>) -> 
     }))
 }
 
-/// A plot of a cohort as SVG: `pairwise-cd` (the seed paper's Fig. 3), `area` or `volume`
-/// (per shape, mm² / mm³). A cohort still running shows the shapes done so far.
+/// A plot of a cohort as SVG: `pairwise-cd` (the seed paper's Fig. 3), `novelty-cd`
+/// (distance of each shape to its nearest training shape), the anatomical measurements
+/// `annulus`, `sinus`, `stj`, `sinus-height`, `length` (mm), `area` or `volume` (per shape,
+/// mm² / mm³). A cohort still running shows the shapes done so far.
 #[utoipa::path(get, path = "/v1/cohorts/{id}/plots/{plot}", tag = "reports",
     params(("id" = i64, Path, description = "Cohort id"),
-           ("plot" = String, Path, description = "Plot name: pairwise-cd, area or volume")),
+           ("plot" = String, Path, description = "Plot name: pairwise-cd, novelty-cd, annulus, sinus, stj, sinus-height, length, area or volume")),
     responses((status = 200, content_type = "image/svg+xml", body = String),
               (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown cohort or plot")))]
 async fn cohort_plot(
@@ -109,6 +122,12 @@ async fn cohort_report(State(state): State<AppState>, Path(id): Path<String>) ->
         ),
         ("arity".into(), cohort.arity.to_string()),
         ("weights".into(), weights),
+        ("selection".into(), cohort.selection.clone()),
+        ("latent noise".into(), cohort.latent_noise.to_string()),
+        (
+            "minimum novelty".into(),
+            cohort.min_novelty.map_or("none".into(), |v| v.to_string()),
+        ),
         ("seed".into(), cohort.seed.to_string()),
         ("resolution".into(), format!("{}³", cohort.resolution)),
         ("created".into(), cohort.created_at.clone()),
@@ -162,10 +181,55 @@ async fn cohort_sections(state: &AppState, cohort: &CohortRow) -> Result<Vec<Sec
         None => Vec::new(),
     };
     let shapes = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, i64::MAX, 0).await?;
+    let novelty: Vec<f64> = shapes.iter().filter_map(|s| s.novelty_cd).collect();
+    let anatomy: Vec<ShapeAnatomy> = shapes
+        .iter()
+        .filter_map(|s| s.anatomy.as_deref())
+        .filter_map(|json| serde_json::from_str(json).ok())
+        .collect();
+    let measured = |f: fn(&ShapeAnatomy) -> Option<f64>| -> Vec<f64> {
+        anatomy.iter().filter_map(f).collect()
+    };
     let area: Vec<f64> = shapes.iter().map(|s| s.area_mm2).collect();
     let volume: Vec<f64> = shapes.iter().map(|s| s.volume_mm3).collect();
+    let floor = sections::novelty_floor(cohort.min_novelty);
+    let mm = |heading: &str, what: &str, values: &[f64]| {
+        sections::distribution(
+            heading,
+            &format!("{what} of each generated shape, measured on its centreline (mm)."),
+            &format!("{} (mm)", heading.to_lowercase()),
+            values,
+            &[],
+        )
+    };
     Ok(vec![
         sections::pairwise_cd(&matrix),
+        sections::novelty_cd(&novelty, floor.as_slice()),
+        mm(
+            "Annulus diameter",
+            "Mean annulus diameter",
+            &measured(|a| a.annulus_mm),
+        ),
+        mm(
+            "Sinus diameter",
+            "Sinus-of-Valsalva diameter",
+            &measured(|a| a.sinus_mm),
+        ),
+        mm(
+            "STJ diameter",
+            "Sinotubular-junction diameter",
+            &measured(|a| a.stj_mm),
+        ),
+        mm(
+            "Sinus height",
+            "Annulus-to-junction distance",
+            &measured(|a| a.sinus_height_mm),
+        ),
+        mm(
+            "Centreline length",
+            "Centreline length",
+            &measured(|a| Some(a.length_mm)),
+        ),
         sections::distribution(
             "Surface area",
             "Area of each generated surface in millimetres (training frame restored).",

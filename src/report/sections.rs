@@ -69,6 +69,29 @@ pub fn pairwise_cd(matrix: &[Vec<f64>]) -> Section {
     )
 }
 
+/// Distances of generated shapes to their nearest training shape (privacy of the training
+/// patients: a shape at the sampling floor would be a copy).
+pub fn novelty_cd(values: &[f64], markers: &[Marker]) -> Section {
+    distribution(
+        "Novelty: Chamfer distance to the nearest training shape",
+        &format!(
+            "For each generated shape, the distance to the closest reconstruction of a training \
+             shape; small values mean near-copies of a training patient. {CHAMFER_UNITS}."
+        ),
+        CD_LABEL,
+        values,
+        markers,
+    )
+}
+
+/// The requested minimum novelty as a reference line, when the cohort asked for one.
+pub fn novelty_floor(min_novelty: Option<f64>) -> Option<Marker> {
+    min_novelty.filter(|v| *v > 0.0).map(|value| Marker {
+        label: "requested minimum".into(),
+        value,
+    })
+}
+
 /// The entries above the diagonal of a square matrix, row by row.
 pub fn upper_triangle(matrix: &[Vec<f64>]) -> Vec<f64> {
     matrix

@@ -38,6 +38,24 @@ async fn cohort_plots_count_every_pair_and_every_shape() {
     assert!(area.contains("Surface area (n = 4)"));
     let volume = svg(&app, &format!("/v1/cohorts/{id}/plots/volume")).await;
     assert!(volume.contains("Enclosed volume (n = 4)"));
+    let novelty = svg(&app, &format!("/v1/cohorts/{id}/plots/novelty-cd")).await;
+    assert!(
+        novelty.contains("(n = 4)"),
+        "every shape has a novelty: {novelty}"
+    );
+    // The test shapes are measured as roots (see the science tests): one annulus each.
+    let shapes = app.get(&format!("/v1/cohorts/{id}/shapes")).await.json();
+    let measured = shapes["items"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| s["anatomy"]["annulus_mm"].is_number())
+        .count();
+    let annulus = svg(&app, &format!("/v1/cohorts/{id}/plots/annulus")).await;
+    assert!(
+        annulus.contains(&format!("Annulus diameter (n = {measured})")),
+        "{annulus}"
+    );
 }
 
 #[tokio::test]
@@ -51,7 +69,7 @@ async fn a_cohort_report_is_one_self_contained_page() {
     let html = text(&r.body);
     assert!(html.starts_with("<!DOCTYPE html>"));
     assert!(html.contains(&format!("<h1>Cohort {id}</h1>")));
-    assert_eq!(html.matches("<svg").count(), 3);
+    assert_eq!(html.matches("<svg").count(), 9);
     assert!(html.contains("3 of 3") && html.contains(MODEL));
     // Nothing to fetch: no scripts, no linked resources.
     assert!(!html.contains("<script") && !html.contains(" src=") && !html.contains("href="));
@@ -89,7 +107,7 @@ async fn unknown_subjects_and_plots_are_404_naming_the_choices() {
         r.json()["detail"]
             .as_str()
             .unwrap()
-            .contains("pairwise-cd, area, volume")
+            .contains("pairwise-cd, novelty-cd, annulus")
     );
     assert_eq!(
         app.get("/v1/models/nope/report").await.status,
