@@ -89,7 +89,9 @@ fn draw(
         .x_desc(plot.x_label)
         .y_desc("count")
         .x_label_formatter(&|x| tick(*x))
-        .y_label_formatter(&|y| format!("{y:.0}"))
+        .y_labels((y_hi.ceil() as usize + 1).clamp(3, 11))
+        .y_label_formatter(&|y| integer_tick(*y))
+        .light_line_style(WHITE)
         .disable_x_mesh()
         .draw()?;
     let fill = PALETTE[0].mix(0.55).filled();
@@ -177,6 +179,7 @@ fn draw_overlay(
         .y_desc("fraction per bin")
         .x_label_formatter(&|x| tick(*x))
         .y_label_formatter(&|y| format!("{y:.2}"))
+        .light_line_style(WHITE)
         .disable_x_mesh()
         .draw()?;
     for (k, ((name, values), fr)) in series.iter().zip(&fractions).enumerate() {
@@ -250,6 +253,15 @@ fn x_range(hist: &Histogram, markers: &[Marker]) -> (f64, f64) {
     } else {
         let pad = (hi - lo) * 0.03;
         (lo - pad, hi + pad)
+    }
+}
+
+/// Counts are whole numbers: fractional tick positions stay unlabelled.
+fn integer_tick(y: f64) -> String {
+    if (y - y.round()).abs() < 1e-9 {
+        format!("{y:.0}")
+    } else {
+        String::new()
     }
 }
 
