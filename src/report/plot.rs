@@ -2,6 +2,7 @@
 //! a histogram with optional reference lines, and several distributions overlaid as
 //! normalised step curves so cohorts of different sizes compare directly.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use crate::jobs::stats::{Histogram, histogram};
@@ -78,12 +79,7 @@ fn draw(
     let hist = histogram(values, PLOT_BINS);
     let (x_lo, x_hi) = x_range(&hist, plot.markers);
     let y_hi = hist.counts.iter().copied().max().unwrap_or(1).max(1) as f64 * 1.1;
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(44)
-        .y_label_area_size(52)
-        .build_cartesian_2d(x_lo..x_hi, 0.0..y_hi)?;
+    let mut chart = chart(root, &title, (x_lo, x_hi), y_hi)?;
     chart
         .configure_mesh()
         .x_desc(plot.x_label)
@@ -167,12 +163,7 @@ fn draw_overlay(
         .max(1e-9)
         * 1.15;
     let (x_lo, x_hi) = (edges[0], edges[edges.len() - 1]);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(44)
-        .y_label_area_size(52)
-        .build_cartesian_2d(x_lo..x_hi, 0.0..y_hi)?;
+    let mut chart = chart(root, title, (x_lo, x_hi), y_hi)?;
     chart
         .configure_mesh()
         .x_desc(x_label)
@@ -212,6 +203,24 @@ fn draw_overlay(
         .position(SeriesLabelPosition::UpperRight)
         .draw()?;
     Ok(())
+}
+
+/// Cartesian axes over `x` × [0, y_hi] with the title above, as every plot here has them.
+fn chart<'a, 'b>(
+    root: &'a DrawingArea<SVGBackend<'b>, plotters::coord::Shift>,
+    title: &str,
+    (x_lo, x_hi): (f64, f64),
+    y_hi: f64,
+) -> Result<
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    DrawingAreaErrorKind<std::io::Error>,
+> {
+    ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(44)
+        .y_label_area_size(52)
+        .build_cartesian_2d(x_lo..x_hi, 0.0..y_hi)
 }
 
 fn no_data(
