@@ -252,6 +252,17 @@ impl Collector<'_> {
                 .ok_or_else(|| err("POSITION is missing or lies outside its buffer"))?
                 .collect();
             let count = positions.len();
+            // gltf's index reader treats any other component type as unreachable.
+            if let Some(accessor) = primitive.indices() {
+                use gltf::accessor::DataType;
+                let kind = accessor.data_type();
+                if !matches!(kind, DataType::U8 | DataType::U16 | DataType::U32) {
+                    return Err(err(&format!(
+                        "indices must be unsigned integers (UNSIGNED_BYTE, UNSIGNED_SHORT or \
+                         UNSIGNED_INT), the accessor has {kind:?}"
+                    )));
+                }
+            }
             let indices: Vec<u32> = match (primitive.indices(), reader.read_indices()) {
                 (_, Some(i)) => i.into_u32().collect(),
                 (None, None) => (0..count as u32).collect(),

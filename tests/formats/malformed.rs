@@ -260,6 +260,18 @@ fn malformed_cases() -> Vec<Case> {
                 "indices accessor lies outside its buffer",
             ],
         ),
+        // Found by fuzzing: float indices made the glTF crate reach `unreachable!`.
+        case(
+            "gltf float indices",
+            Gltf,
+            gltf.replacen("\"componentType\": 5125", "\"componentType\": 5126", 1)
+                .into_bytes(),
+            &[
+                "mesh 0 primitive 0",
+                "indices must be unsigned integers",
+                "F32",
+            ],
+        ),
     ]
 }
 
