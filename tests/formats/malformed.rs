@@ -328,3 +328,28 @@ fn truncated_and_corrupted_files_never_panic() {
         }
     }
 }
+
+/// Inputs that made a fuzz target fail: each must give an error naming the file.
+#[test]
+fn inputs_found_by_fuzzing_are_errors() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/formats/fuzz_found");
+    for (file, format, expected) in [
+        // tobj multiplies a huge texture index without overflow checks; the reader's panic
+        // guard turns that into an error.
+        ("tobj_texcoord_overflow.obj", MeshFormat::Obj, "OBJ"),
+        (
+            "float_indices.glb",
+            MeshFormat::Glb,
+            "indices must be unsigned integers",
+        ),
+    ] {
+        let bytes = std::fs::read(dir.join(file)).unwrap();
+        let err = read_mesh_bytes(&bytes, format, file)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(file) && err.contains(expected),
+            "{file}: {err}"
+        );
+    }
+}
