@@ -52,16 +52,9 @@ async fn model_plot(
     State(state): State<AppState>,
     Path((id, plot)): Path<(String, String)>,
 ) -> Result<Response> {
-    let name = plot.trim_end_matches(".svg");
-    if !MODEL_PLOTS.contains(&name) {
-        return Err(unknown_plot(&plot, &MODEL_PLOTS));
-    }
-    let sections = model_sections(&state, &id).await?.1;
-    Ok(svg(sections
-        .into_iter()
-        .next()
-        .map(|s| s.svg)
-        .unwrap_or_default()))
+    let position = plot_position(&plot, &MODEL_PLOTS)?;
+    let mut sections = model_sections(&state, &id).await?.1;
+    Ok(svg(sections.swap_remove(position).svg))
 }
 
 /// The model's report as one self-contained HTML page.
@@ -92,10 +85,7 @@ async fn cohort_plot(
     State(state): State<AppState>,
     Path((id, plot)): Path<(String, String)>,
 ) -> Result<Response> {
-    let name = plot.trim_end_matches(".svg");
-    let Some(position) = COHORT_PLOTS.iter().position(|p| *p == name) else {
-        return Err(unknown_plot(&plot, &COHORT_PLOTS));
-    };
+    let position = plot_position(&plot, &COHORT_PLOTS)?;
     let cohort = load_cohort(&state, &id).await?;
     let mut sections = cohort_sections(&state, &cohort).await?;
     Ok(svg(sections.swap_remove(position).svg))
@@ -254,8 +244,12 @@ async fn load_cohort(state: &AppState, raw: &str) -> Result<CohortRow> {
         .ok_or_else(|| ApiError::not_found("cohort", raw))
 }
 
-fn unknown_plot(plot: &str, known: &[&str]) -> ApiError {
-    ApiError::not_found("plot", format!("{plot} (available: {})", known.join(", ")))
+/// Index of `plot` (with or without `.svg`) among the `known` plot names, in section order.
+fn plot_position(plot: &str, known: &[&str]) -> Result<usize> {
+    let name = plot.trim_end_matches(".svg");
+    known.iter().position(|p| *p == name).ok_or_else(|| {
+        ApiError::not_found("plot", format!("{plot} (available: {})", known.join(", ")))
+    })
 }
 
 fn svg(body: String) -> Response {
