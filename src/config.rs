@@ -129,6 +129,12 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_MAX_ATTEMPTS", default_value_t = 5)]
     pub max_attempts: i64,
 
+    /// Nice value (0–19) of the threads that train and generate: above 0 the API answers
+    /// first when it competes with them for a core.
+    #[arg(long, env = "AORTAGEN_WORKER_NICE", default_value_t = 10,
+          value_parser = clap::value_parser!(i32).range(0..=19))]
+    pub worker_nice: i32,
+
     /// Log as JSON lines instead of human-readable text.
     #[arg(long, env = "AORTAGEN_LOG_JSON", default_value_t = false)]
     pub log_json: bool,

@@ -20,6 +20,7 @@ pub struct ServeArgs {
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     crate::telemetry::init_subscriber("aortagen=info,tower_http=info", args.config.log_json);
     let workers = args.config.worker_count();
+    crate::jobs::priority::init_background_pool(args.config.worker_nice);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .thread_name("aortagen")

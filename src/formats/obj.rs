@@ -16,6 +16,12 @@ pub(super) fn read(bytes: &[u8], name: &str) -> Result<LoadedMesh, FormatError> 
         ignore_points: true,
         ignore_lines: true,
     };
+    // Indices are checked here first: tobj multiplies texture and normal indices without
+    // overflow checks, so a huge index would panic inside it instead of being reported.
+    if let Some((line, msg)) = find_bad_index(bytes) {
+        let at = format!("line {line}");
+        return Err(FormatError::malformed_at(name, MeshFormat::Obj, at, msg));
+    }
     let mut source = LineCounter {
         data: bytes,
         pos: 0,
@@ -114,6 +120,7 @@ fn describe(bytes: &[u8], name: &str, e: tobj::LoadError, line: usize) -> Format
 }
 
 /// The first face corner that refers to a missing vertex, texture coordinate or normal.
+/// Like tobj, texture and normal indices are not checked when the file has none of them.
 fn find_bad_index(bytes: &[u8]) -> Option<(usize, String)> {
     let text = String::from_utf8_lossy(bytes);
     let totals = ["v", "vt", "vn"].map(|kw| {
@@ -134,6 +141,9 @@ fn find_bad_index(bytes: &[u8]) -> Option<(usize, String)> {
                         let Ok(raw) = field.parse::<i64>() else {
                             continue;
                         };
+                        if slot > 0 && totals[slot] == 0 {
+                            continue;
+                        }
                         let what = ["vertex", "texture coordinate", "normal"][slot];
                         let resolved = if raw < 0 {
                             seen[slot] as i64 + raw + 1

@@ -12,13 +12,13 @@ use sha2::{Digest, Sha256};
 
 use super::engine::{GeneratedShape, ModelInfo, ShapeSpec};
 use super::plan::{CohortPlan, Weighting};
+use super::priority::spawn_background;
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
 use crate::anatomy::shape::measure_shape;
 use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
 use crate::sdf::generate::MAX_REDRAWS;
 use crate::sdf::generate::Selection;
 use crate::sdf::novelty::{Novelty, NoveltyReference};
-use crate::telemetry::spawn_blocking_with_span;
 
 /// The payload of a `cohort` job.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -69,7 +69,7 @@ pub(super) async fn run(
     let latents = if cohort.selection == Selection::Spread.as_str() {
         let engine = ctx.engine.clone();
         let dir = model_dir.clone();
-        let latents = spawn_blocking_with_span(move || engine.training_latents(&dir))
+        let latents = spawn_background(move || engine.training_latents(&dir))
             .await
             .map_err(join_error)?
             .context("cannot read the training latents")?;
@@ -213,7 +213,7 @@ async fn novelty_reference(
     let engine = ctx.engine.clone();
     let dir = model_dir.to_path_buf();
     let flag = flag.clone();
-    spawn_blocking_with_span(move || engine.novelty_reference(&dir, resolution, &flag))
+    spawn_background(move || engine.novelty_reference(&dir, resolution, &flag))
         .await
         .map_err(join_error)?
 }
@@ -227,7 +227,7 @@ async fn generate(
     flag: Arc<AtomicBool>,
 ) -> anyhow::Result<Candidate> {
     let engine = ctx.engine.clone();
-    spawn_blocking_with_span(move || {
+    spawn_background(move || {
         let shape = engine.generate_shape(&model_dir, &spec, &flag)?;
         shape
             .mesh_unit
@@ -253,7 +253,7 @@ async fn generate(
 
 /// Encodes the kept draw and measures its anatomy in mm, off the executor.
 async fn finish(candidate: Candidate) -> anyhow::Result<Finished> {
-    spawn_blocking_with_span(move || {
+    spawn_background(move || {
         let blob = mesh_blob::encode(&candidate.shape.mesh_unit);
         let sha = hex(&Sha256::digest(&blob));
         let shape = &candidate.shape;
@@ -329,7 +329,7 @@ async fn compute_metrics(ctx: &JobContext, cohort: &CohortRow) -> anyhow::Result
     let stored = db::shapes::cohort_meshes(&ctx.pool, cohort.cohort_id).await?;
     let engine = ctx.engine.clone();
     let seed = cohort.seed as u64;
-    let matrix = spawn_blocking_with_span(move || -> anyhow::Result<Vec<Vec<f64>>> {
+    let matrix = spawn_background(move || -> anyhow::Result<Vec<Vec<f64>>> {
         let meshes = stored
             .iter()
             .map(|s| mesh_blob::decode(&s.mesh).with_context(|| format!("shape {}", s.shape_id)))

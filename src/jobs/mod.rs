@@ -5,6 +5,7 @@
 pub mod cohort;
 pub mod engine;
 pub mod plan;
+pub mod priority;
 pub mod stats;
 pub mod training;
 pub mod worker;

@@ -9,9 +9,9 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
 use super::engine::TrainingSpec;
+use super::priority::spawn_background;
 use super::{JobContext, RunOutcome, join_error, stop_outcome};
 use crate::db::{self, jobs::ClaimedJob};
-use crate::telemetry::spawn_blocking_with_span;
 
 /// The payload of a `training` job.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -36,8 +36,7 @@ pub(super) async fn run(
     let (spec, task_flag) = (payload.spec.clone(), flag.clone());
     let saved = Arc::new(AtomicU64::new(0));
     let task_saved = saved.clone();
-    let mut task =
-        spawn_blocking_with_span(move || engine.train_model(&spec, &task_flag, &task_saved));
+    let mut task = spawn_background(move || engine.train_model(&spec, &task_flag, &task_saved));
     // Saved epochs are the training job's progress: recovery after a killed process
     // compares them with the progress at the claim to tell a slow job from a stuck one.
     let mut reported = 0;
