@@ -2,8 +2,14 @@
 
 use std::path::Path;
 
+use aortagen::cli::compare::CompareArgs;
+use aortagen::cli::generate::{GenerateArgs, Units};
 use aortagen::cli::report::{ReportArgs, run};
+use aortagen::formats::MeshFormat;
 use aortagen::formats::{MeshMetadata, write_mesh_file};
+use aortagen::sdf::backend::Backend;
+use aortagen::sdf::generate::{Selection, Weighting};
+use aortagen::sdf::reconstruct::ExtractionMethod;
 use aortagen::synth::generate_root;
 
 fn args(out: &Path) -> ReportArgs {
@@ -89,4 +95,81 @@ fn a_model_without_evaluation_says_how_to_make_one() {
     .unwrap_err();
     assert!(format!("{err:#}").contains("aortagen evaluate"), "{err:#}");
     assert!(!out.exists());
+}
+
+fn generate(model: &Path, out: &Path, units: Units) {
+    aortagen::cli::generate::run(GenerateArgs {
+        model: model.to_path_buf(),
+        arity: 2,
+        weights: None,
+        weighting: Weighting::Dirichlet,
+        selection: Selection::Uniform,
+        latent_noise: 0.0,
+        min_novelty: None,
+        novelty_points: 2_000,
+        count: 3,
+        seed: 11,
+        resolution: 32,
+        format: MeshFormat::Ply,
+        units,
+        out: out.to_path_buf(),
+        backend: Backend::default(),
+        extraction: ExtractionMethod::Fast,
+    })
+    .unwrap();
+}
+
+/// The same cohort written in mm and in unit-ball coordinates has the same pairwise
+/// distances (the comparison brings both into the model's unit ball), and the novelty it
+/// reports is the one recorded beside each shape.
+#[test]
+fn compare_reads_cohorts_in_either_units_and_their_recorded_novelty() {
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
+    let dir = tempfile::tempdir().unwrap();
+    let (mm, unit) = (dir.path().join("mm"), dir.path().join("unit"));
+    generate(&model, &mm, Units::Mm);
+    generate(&model, &unit, Units::Unit);
+    let (out, json) = (dir.path().join("c.html"), dir.path().join("c.json"));
+    aortagen::cli::compare::run(CompareArgs {
+        cohorts: vec![
+            ("mm".into(), mm),
+            ("unit".into(), unit.clone()),
+            ("k4".into(), wide),
+        ],
+        points: 3_000,
+        seed: 5,
+        out: out.clone(),
+        json: Some(json.clone()),
+        svg_dir: None,
+    })
+    .unwrap();
+    let numbers: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let cohorts = numbers.as_array().unwrap();
+    assert_eq!(cohorts.len(), 2);
+    for c in cohorts {
+        assert_eq!(c["shapes"], 3);
+        assert_eq!(c["pairwise"]["n"], 3, "3 shapes have 3 pairs");
+        assert_eq!(c["novelty"]["n"], 3);
+    }
+    let median = |i: usize, what: &str| cohorts[i][what]["median"].as_f64().unwrap();
+    let pairwise = (median(0, "pairwise"), median(1, "pairwise"));
+    assert!(
+        (pairwise.0 - pairwise.1).abs() <= 1e-4 * pairwise.1,
+        "{pairwise:?}"
+    );
+    let mut recorded: Vec<f64> = (0..3)
+        .map(|i| {
+            let path = unit.join(format!("shape_{i:04}.json"));
+            let p: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+            p["novelty"]["chamfer"].as_f64().unwrap()
+        })
+        .collect();
+    recorded.sort_by(f64::total_cmp);
+    assert_eq!(median(1, "novelty"), recorded[1]);
+    let html = std::fs::read_to_string(&out).unwrap();
+    assert!(
+        html.contains("Pairwise Chamfer distance within each cohort") && html.contains("in unit")
+    );
 }

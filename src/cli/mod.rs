@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 
+pub mod compare;
 pub mod evaluate;
 pub mod generate;
 pub mod measure;
@@ -43,6 +44,8 @@ pub enum Command {
     Measure(measure::MeasureArgs),
     /// Write an HTML report with SVG plots of a model or a directory of meshes.
     Report(report::ReportArgs),
+    /// Compare the diversity and novelty of generated cohorts side by side.
+    Compare(compare::CompareArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -58,5 +61,6 @@ pub fn run() -> anyhow::Result<()> {
         Command::Serve(args) => serve::run(args),
         Command::Measure(args) => measure::run(args),
         Command::Report(args) => report::run(args),
+        Command::Compare(args) => compare::run(args),
     }
 }
