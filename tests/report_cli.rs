@@ -131,11 +131,9 @@ fn compare_reads_cohorts_in_either_units_and_their_recorded_novelty() {
     generate(&model, &unit, Units::Unit);
     let (out, json) = (dir.path().join("c.html"), dir.path().join("c.json"));
     aortagen::cli::compare::run(CompareArgs {
-        cohorts: vec![
-            ("mm".into(), mm),
-            ("unit".into(), unit.clone()),
-            ("k4".into(), wide),
-        ],
+        cohorts: vec![("in mm".into(), mm), ("in unit".into(), unit.clone())],
+        training_model: Some(model.clone()),
+        resolution: 32,
         points: 3_000,
         seed: 5,
         out: out.clone(),
@@ -145,7 +143,19 @@ fn compare_reads_cohorts_in_either_units_and_their_recorded_novelty() {
     .unwrap();
     let numbers: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    let cohorts = numbers.as_array().unwrap();
+    let (training, cohorts) = numbers.as_array().unwrap().split_first().unwrap();
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(model.join("manifest.json")).unwrap()).unwrap();
+    let shapes = manifest["shapes"].as_array().unwrap().len();
+    assert_eq!(
+        training["shapes"], shapes,
+        "one reconstruction per training shape"
+    );
+    assert_eq!(training["pairwise"]["n"], shapes * (shapes - 1) / 2);
+    assert!(
+        training["novelty"].is_null(),
+        "training shapes have no novelty"
+    );
     assert_eq!(cohorts.len(), 2);
     for c in cohorts {
         assert_eq!(c["shapes"], 3);
@@ -153,6 +163,7 @@ fn compare_reads_cohorts_in_either_units_and_their_recorded_novelty() {
         assert_eq!(c["novelty"]["n"], 3);
     }
     let median = |i: usize, what: &str| cohorts[i][what]["median"].as_f64().unwrap();
+    assert!(median(0, "pairwise") > 0.0);
     let pairwise = (median(0, "pairwise"), median(1, "pairwise"));
     assert!(
         (pairwise.0 - pairwise.1).abs() <= 1e-4 * pairwise.1,

@@ -3,6 +3,7 @@
 //! to its nearest training shape — as an HTML report, SVG plots and JSON numbers.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
 use anyhow::{Context, bail, ensure};
 use rayon::prelude::*;
@@ -15,9 +16,13 @@ use crate::geometry::sampling::sample_surface;
 use crate::report::plot::{Series, overlay_svg};
 use crate::report::sections::{CD_LABEL, upper_triangle};
 use crate::report::{Report, Section, footer, render_html};
+use crate::sdf::backend::Backend;
 use crate::sdf::data::read_mesh_directory;
 use crate::sdf::evaluation::{CHAMFER_UNITS, quantile};
 use crate::sdf::generate::Provenance;
+use crate::sdf::novelty::training_surfaces;
+use crate::sdf::reconstruct::ExtractionMethod;
+use crate::sdf::store::LoadedModel;
 
 /// Compare cohorts written by `aortagen generate` (each in its own directory).
 #[derive(Debug, clap::Args)]
@@ -25,6 +30,13 @@ pub struct CompareArgs {
     /// A cohort as `LABEL=DIR`; repeat for each cohort, in the order to show them.
     #[arg(long = "cohort", required = true, value_parser = parse_cohort)]
     pub cohorts: Vec<(String, PathBuf)>,
+    /// Also show the model's reconstructions of its own training shapes as a first series:
+    /// the diversity of the data the cohorts were drawn from.
+    #[arg(long)]
+    pub training_model: Option<PathBuf>,
+    /// Grid resolution of those reconstructions (use the cohorts' resolution).
+    #[arg(long, default_value_t = 128)]
+    pub resolution: usize,
     /// Points sampled per surface for the pairwise Chamfer distances.
     #[arg(long, default_value_t = DEFAULT_CHAMFER_POINTS)]
     pub points: usize,
@@ -116,6 +128,25 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     init_logging();
     ensure!(args.points > 0, "--points must be at least 1");
     let mut cohorts = Vec::new();
+    if let Some(model) = &args.training_model {
+        tracing::info!(model = %model.display(), "reconstructing the training shapes");
+        let loaded = LoadedModel::load(model, Backend::default())?;
+        let surfaces = training_surfaces(
+            &loaded,
+            &loaded.latents(),
+            args.resolution,
+            ExtractionMethod::Fast,
+            &AtomicBool::new(false),
+        )?;
+        cohorts.push(diversity_of(
+            "training shapes",
+            model,
+            &surfaces,
+            Vec::new(),
+            args.points,
+            args.seed,
+        )?);
+    }
     for (label, dir) in &args.cohorts {
         tracing::info!(cohort = %label, dir = %dir.display(), "reading and measuring");
         cohorts.push(measure_cohort(label, dir, args.points, args.seed)?);
@@ -174,26 +205,36 @@ pub fn measure_cohort(
             nearest.insert(n.nearest);
         }
     }
+    let mut measured = diversity_of(label, dir, &unit, novelty, points, seed)?;
+    measured.distinct_nearest = nearest.len();
+    Ok(measured)
+}
+
+/// Pairwise distances among unit-ball meshes, with their novelty values if known.
+fn diversity_of(
+    label: &str,
+    dir: &Path,
+    unit: &[TriMesh],
+    novelty: Vec<f64>,
+    points: usize,
+    seed: u64,
+) -> anyhow::Result<CohortDiversity> {
     let sets: Vec<Vec<[f32; 3]>> = unit
         .par_iter()
         .enumerate()
         .map(|(i, mesh)| sample_surface(mesh, points, seed.wrapping_add(i as u64)).points)
         .collect();
     if let Some(i) = sets.iter().position(Vec::is_empty) {
-        bail!(
-            "{}: shape {} has no surface to sample",
-            dir.display(),
-            meshes[i].0
-        );
+        bail!("{}: shape {i} has no surface to sample", dir.display());
     }
     let pairwise_values = upper_triangle(&pairwise_chamfer(&sets));
     Ok(CohortDiversity {
         label: label.to_owned(),
         dir: dir.to_path_buf(),
-        shapes: meshes.len(),
+        shapes: unit.len(),
         pairwise: Summary::of(&pairwise_values),
         novelty: Summary::of(&novelty),
-        distinct_nearest: nearest.len(),
+        distinct_nearest: 0,
         pairwise_values,
         novelty_values: novelty,
     })
