@@ -1,17 +1,22 @@
 #!/usr/bin/env bash
 # The diversity experiment of docs/diversity/README.md: 100-shape cohorts of one model at
 # arity 2, 4 and 8 and with each diversity control, compared side by side.
-#   docs/diversity/run.sh MODEL_DIR [OUT_DIR]      (RESOLUTION=128 COUNT=100 SEED=2026)
+#   docs/diversity/run.sh MODEL_DIR [OUT_DIR]      (RESOLUTION=64 COUNT=100 SEED=2026;
+#   AORTAGEN=path/to/binary to use a built binary instead of building one)
 set -euo pipefail
 model="${1:?usage: run.sh MODEL_DIR [OUT_DIR]}"
 out="${2:-/tmp/aortagen-diversity}"
-resolution="${RESOLUTION:-128}"
+resolution="${RESOLUTION:-64}"
 count="${COUNT:-100}"
 seed="${SEED:-2026}"
 here="$(cd "$(dirname "$0")" && pwd)"
 cd "$here/../.."
-cargo build --release --locked --quiet
-bin="${CARGO_TARGET_DIR:-target}/release/aortagen"
+if [ -n "${AORTAGEN:-}" ]; then
+    bin="$AORTAGEN"
+else
+    cargo build --release --locked --quiet
+    bin="${CARGO_TARGET_DIR:-target}/release/aortagen"
+fi
 mkdir -p "$out"
 
 cohort() { # NAME GENERATE-FLAGS...
@@ -31,9 +36,9 @@ cohort() { # NAME GENERATE-FLAGS...
 cohort arity2 --arity 2
 cohort arity4 --arity 4
 cohort arity8 --arity 8
-cohort arity4-noise0.5 --arity 4 --latent-noise 0.5
 cohort arity4-noise1 --arity 4 --latent-noise 1
 cohort arity4-spread --arity 4 --selection spread
+cohort arity4-noise0.5 --arity 4 --latent-noise 0.5
 
 "$bin" compare --training-model "$model" --resolution "$resolution" \
     --cohort "arity 2=$out/arity2" \

@@ -10,11 +10,12 @@
 //! (BURN_CPU.md, config c: ≈ 17 000 surface points per second per training step, 9× config a);
 //! 100 000 cached points per shape keep σ_local meaningful at a tenth of the paper's memory;
 //! 2 048 + 2 048 points per shape per step and 8 shapes per batch keep one step near a second.
-//! Measured (release build, 100 SynthAorta shapes, shared 2-core machine, preliminary):
-//! ≈ 12 900 surface points/s, 16 s per epoch, ≈ 20 s of one-off sampling; 240 epochs ≈ 65 min.
-//! The learning rate halves every 80 epochs (three halvings, as the paper's schedule has
-//! ten over 5000 epochs, scaled to the shorter run). Fidelity per epoch budget has not been
-//! tuned yet: treat these as a starting point.
+//! Measured on 100 SynthAorta shapes (release build, 2-core machine, docs/synthaorta-100):
+//! ≈ 17.5 s per epoch with nothing else running, ≈ 20 s of one-off sampling, so 240 epochs
+//! take ≈ 70 min; reconstruction CD median 5.8e-5 against a sampling floor of 4.9e-5. The
+//! learning rate halves every 80 epochs (three halvings, as the paper's schedule has ten over
+//! 5000 epochs, scaled to the shorter run). That run's loss reached its final value by epoch
+//! 180 (≈ 53 min), so `--epochs 180` is the budget for an hour.
 
 use serde::{Deserialize, Serialize};
 
