@@ -532,7 +532,10 @@ mod tests {
         }
     }
 
-    fn targets(pairs: &[(&str, Option<f64>, Option<f64>)]) -> Result<Targets, TargetError> {
+    /// A measurement name with its bounds.
+    type Bounds<'a> = (&'a str, Option<f64>, Option<f64>);
+
+    fn targets(pairs: &[Bounds]) -> Result<Targets, TargetError> {
         let map = pairs
             .iter()
             .map(|&(n, min, max)| (n.to_string(), TargetRange { min, max }))
@@ -542,7 +545,7 @@ mod tests {
 
     #[test]
     fn bad_targets_name_the_field_and_rule() {
-        let cases: [(&[(&str, Option<f64>, Option<f64>)], &str, &str); 6] = [
+        let cases: [(&[Bounds], &str, &str); 6] = [
             (&[], "targets", "non-empty"),
             (
                 &[("aorta_mm", Some(1.0), None)],

@@ -8,7 +8,7 @@ use super::progress::{init_logging, terminal_bar};
 use crate::anatomy::shape::measure_shape;
 use crate::anatomy::targets::{
     DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, Measured, SCREEN_RESOLUTION, TargetRange, Targets,
-    check_feasible, guided_pool, parse_target_arg, search,
+    check_feasible, guided_pool, parse_target_arg, search, training_ranges,
 };
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
@@ -170,6 +170,14 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
             let training =
                 measure_training_shapes(&model, &latents, SCREEN_RESOLUTION, args.extraction)
                     .context("cannot measure the training shapes")?;
+            for (m, range) in targets.iter() {
+                if let Some((lo, hi)) = training_ranges(&training, m) {
+                    println!(
+                        "target {} {range}; training shapes span [{lo:.2}, {hi:.2}] mm",
+                        m.name()
+                    );
+                }
+            }
             check_feasible(targets, &training).map_err(|e| anyhow::anyhow!("--target: {e}"))?;
             guided_pool(targets, &training, args.arity)
         }
