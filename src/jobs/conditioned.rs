@@ -63,7 +63,9 @@ pub fn measure_training_shapes(
 }
 
 /// The model's training-shape measurements: stored ones, or computed off the executor and
-/// stored (concurrent first uses may both compute; they store the same result).
+/// stored. The computation runs as its own task, so a request that times out while waiting
+/// for it still leaves the result stored for the next one (concurrent first uses may both
+/// compute; they store the same result).
 pub async fn training_anatomy(
     pool: &SqlitePool,
     engine: Arc<dyn CohortEngine>,
@@ -78,16 +80,21 @@ pub async fn training_anatomy(
             return Ok(stored);
         }
     }
-    let dir = model_dir.to_path_buf();
-    let measured = spawn_blocking_with_span(move || {
-        measure_training_shapes(&*engine, &dir, count, &AtomicBool::new(false))
-    })
-    .await
-    .map_err(join_error)??;
-    let json = serde_json::to_string(&measured)?;
-    db::models::set_training_anatomy(pool, model_id, &json).await?;
-    tracing::info!(model_id, count, "training shapes measured");
-    Ok(measured)
+    let (pool, model_id, dir) = (pool.clone(), model_id.to_owned(), model_dir.to_path_buf());
+    let task = async move {
+        let measured = spawn_blocking_with_span(move || {
+            measure_training_shapes(&*engine, &dir, count, &AtomicBool::new(false))
+        })
+        .await
+        .map_err(join_error)??;
+        let json = serde_json::to_string(&measured)?;
+        db::models::set_training_anatomy(&pool, &model_id, &json).await?;
+        tracing::info!(model_id, count, "training shapes measured");
+        Ok(measured)
+    };
+    tokio::spawn(tracing::Instrument::in_current_span(task))
+        .await
+        .map_err(join_error)?
 }
 
 /// Measures a generated shape in mm.
