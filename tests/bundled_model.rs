@@ -84,3 +84,36 @@ fn the_engine_finds_a_training_shape_as_its_own_nearest_neighbour() {
     let other = reference.novelty(&blend.mesh_unit, 11).unwrap();
     assert!(other.chamfer > own.chamfer, "{other:?} vs {own:?}");
 }
+
+#[test]
+fn the_service_and_the_command_line_measure_training_shapes_alike() {
+    use std::sync::atomic::AtomicBool;
+
+    use aortagen::engine::SdfEngine;
+    use aortagen::jobs::conditioned::measure_training_shapes;
+
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
+    let engine = SdfEngine::new(Backend::default());
+    let service = measure_training_shapes(&engine, &dir, 2, &AtomicBool::new(false)).unwrap();
+    let model = bundled();
+    let latents = model.latents();
+    let cli = aortagen::sdf::conditioned::measure_training_shapes(
+        &model,
+        &latents[..2],
+        service.resolution,
+        ExtractionMethod::Fast,
+    )
+    .unwrap();
+    assert_eq!(service.shapes, cli);
+    for a in cli
+        .iter()
+        .map(|a| a.as_ref().expect("a training root measures"))
+    {
+        assert_eq!(a.method, "root", "{a:?}");
+        // The parametric roots' annuli are adult-sized (about 20–30 mm).
+        assert!(
+            a.annulus_mm.is_some_and(|d| (18.0..32.0).contains(&d)),
+            "{a:?}"
+        );
+    }
+}

@@ -1,6 +1,7 @@
 //! Property-based tests of the cohort request rules (DESIGN §4) and of the per-shape
 //! weights and selections a valid request turns into.
 
+use aortagen::anatomy::targets::Measurement;
 use aortagen::http::cohorts::dto::{CreateCohort, RESOLUTION_RANGE};
 use aortagen::http::error::ApiError;
 use aortagen::http::extract::parse_json;
@@ -202,5 +203,42 @@ proptest! {
         prop_assert_eq!(sorted.len(), arity, "indices repeat: {:?}", spec.training_indices);
         prop_assert!(sorted.iter().all(|&i| i < training_shapes));
         prop_assert!(check_weights(&spec.weights, arity).is_ok(), "{:?}", spec.weights);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Ordered non-negative bounds on a known measurement are accepted (and round-trip);
+    /// inverted or negative ones are refused naming the measurement or the bound.
+    #[test]
+    fn target_ranges_follow_their_rules(
+        which in 0..Measurement::ALL.len(),
+        a in 0.0f64..200.0,
+        b in 0.0f64..200.0,
+        negative in -200.0f64..-1e-9,
+        candidates in 1i64..=100,
+    ) {
+        let name = Measurement::ALL[which].name();
+        let (lo, hi) = (a.min(b), a.max(b));
+        let base = json!({ "model_id": "m", "count": 1, "arity": 2, "resolution": 32 });
+        let with = |targets: serde_json::Value| {
+            let mut body = base.clone();
+            body["targets"] = targets;
+            body["max_candidates"] = json!(candidates);
+            request(body)
+        };
+        let ok = with(json!({ name: { "min": lo, "max": hi } })).unwrap();
+        let targets = ok.targets().unwrap().unwrap();
+        prop_assert_eq!(targets.iter().count(), 1);
+        prop_assert_eq!(ok.max_candidates, Some(candidates));
+        if lo < hi {
+            let err = with(json!({ name: { "min": hi, "max": lo } })).unwrap_err();
+            let field = format!("targets.{name}");
+            prop_assert_eq!(field_of(&err), Some(field.as_str()));
+        }
+        let err = with(json!({ name: { "min": negative } })).unwrap_err();
+        let field = format!("targets.{name}.min");
+        prop_assert_eq!(field_of(&err), Some(field.as_str()));
     }
 }

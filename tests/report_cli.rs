@@ -106,6 +106,8 @@ fn generate(model: &Path, out: &Path, units: Units) {
         selection: Selection::Uniform,
         latent_noise: 0.0,
         min_novelty: None,
+        targets: Vec::new(),
+        max_candidates: 1,
         novelty_points: 2_000,
         count: 3,
         seed: 11,

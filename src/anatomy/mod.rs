@@ -19,6 +19,7 @@ pub mod root;
 pub mod sections;
 pub mod shape;
 pub mod surface;
+pub mod targets;
 pub mod tracking;
 
 use serde::{Deserialize, Serialize};

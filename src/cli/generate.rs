@@ -5,12 +5,18 @@ use std::path::PathBuf;
 use anyhow::{Context, ensure};
 
 use super::progress::{init_logging, terminal_bar};
+use crate::anatomy::shape::measure_shape;
+use crate::anatomy::targets::{
+    DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, Measured, SCREEN_RESOLUTION, TargetRange, Targets,
+    check_feasible, guided_pool, parse_target_arg, search, training_ranges,
+};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
 use crate::sdf::backend::Backend;
+use crate::sdf::conditioned::{candidate_mixture, measure_training_shapes};
 use crate::sdf::generate::{
     Diversity, GeneratedShape, MAX_REDRAWS, MixSpec, Provenance, Selection, Weighting,
-    generate_shape_with, parse_weights,
+    generate_from_mixture, generate_shape_with, parse_weights,
 };
 use crate::sdf::novelty::{Novelty, NoveltyReference, training_surfaces};
 use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
@@ -54,6 +60,16 @@ pub struct GenerateArgs {
     /// flagged `novelty_met: false` in its provenance.
     #[arg(long)]
     pub min_novelty: Option<f64>,
+    /// Target range of an anatomical measurement, `NAME=MIN:MAX` in mm (either bound may be
+    /// empty; repeatable), e.g. `--target annulus_mm=23:27`. Names: annulus_mm, sinus_mm,
+    /// stj_mm, sinus_height_mm, ascending_mm, length_mm, max_diameter_mm. Each shape then
+    /// searches up to --max-candidates mixtures, screened on a 64³ mesh, for one inside
+    /// every range; when none is, the closest is kept and flagged `targets_met: false`.
+    #[arg(long = "target", value_parser = parse_target_arg)]
+    pub targets: Vec<(String, TargetRange)>,
+    /// Most candidates per shape with --target (1–100).
+    #[arg(long, default_value_t = DEFAULT_MAX_CANDIDATES)]
+    pub max_candidates: u32,
     /// Surface samples per shape for the novelty Chamfer distance.
     #[arg(long, default_value_t = DEFAULT_CHAMFER_POINTS)]
     pub novelty_points: usize,
@@ -105,6 +121,17 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
             "--min-novelty must be a finite number ≥ 0"
         );
     }
+    ensure!(
+        (1..=MAX_CANDIDATES).contains(&args.max_candidates),
+        "--max-candidates must be between 1 and {MAX_CANDIDATES}"
+    );
+    let targets = match args.targets.is_empty() {
+        true => None,
+        false => {
+            let ranges = args.targets.iter().cloned().collect();
+            Some(Targets::parse(&ranges).map_err(|e| anyhow::anyhow!("--target: {e}"))?)
+        }
+    };
     let diversity = Diversity {
         selection: args.selection,
         latent_noise: args.latent_noise,
@@ -137,6 +164,25 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     )
     .context("cannot reconstruct the training shapes for the novelty measure")?;
     let reference = NoveltyReference::new(&surfaces, args.novelty_points)?;
+    let screen_resolution = SCREEN_RESOLUTION.min(args.resolution);
+    let pool = match &targets {
+        Some(targets) => {
+            let training =
+                measure_training_shapes(&model, &latents, SCREEN_RESOLUTION, args.extraction)
+                    .context("cannot measure the training shapes")?;
+            for (m, range) in targets.iter() {
+                if let Some((lo, hi)) = training_ranges(&training, m) {
+                    println!(
+                        "target {} {range}; training shapes span [{lo:.2}, {hi:.2}] mm",
+                        m.name()
+                    );
+                }
+            }
+            check_feasible(targets, &training).map_err(|e| anyhow::anyhow!("--target: {e}"))?;
+            guided_pool(targets, &training, args.arity)
+        }
+        None => Vec::new(),
+    };
     let attempts = if args.min_novelty.is_some() {
         MAX_REDRAWS + 1
     } else {
@@ -147,6 +193,49 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     for shape in 0..args.count {
         let mut best: Option<(GeneratedShape, Novelty, u32)> = None;
         let mut redraws = 0;
+        let mut searched = None;
+        if let Some(targets) = &targets {
+            let mesh_at = |attempt: u32, resolution: usize| -> anyhow::Result<GeneratedShape> {
+                let key = (args.seed, shape, attempt);
+                let mixture = candidate_mixture(&spec, &latents, args.selection, key, &pool)?;
+                generate_from_mixture(
+                    &model,
+                    &latents,
+                    mixture,
+                    args.latent_noise,
+                    key,
+                    resolution,
+                    args.extraction,
+                )
+                .map_err(anyhow::Error::from)
+            };
+            let outcome = search(
+                targets,
+                args.max_candidates,
+                screen_resolution < args.resolution,
+                |attempt| {
+                    let g = mesh_at(attempt, screen_resolution)?;
+                    Ok::<_, anyhow::Error>(
+                        measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string()),
+                    )
+                },
+                |attempt| {
+                    let g = mesh_at(attempt, args.resolution)?;
+                    let novelty = reference.novelty(&g.mesh, args.seed ^ shape)?;
+                    let anatomy = measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string());
+                    Ok(Measured {
+                        rank: novelty.chamfer,
+                        accept: args.min_novelty.is_none_or(|m| novelty.chamfer >= m),
+                        candidate: (g, novelty, attempt),
+                        anatomy,
+                    })
+                },
+            )
+            .with_context(|| format!("shape {shape}"))?;
+            searched = Some((outcome.candidates, outcome.met, outcome.kept.anatomy.ok()));
+            best = Some(outcome.kept.candidate);
+        }
+        let attempts = if searched.is_some() { 0 } else { attempts };
         for attempt in 0..attempts {
             let generated = generate_shape_with(
                 &model,
@@ -181,6 +270,9 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
             novelty: Some(novelty),
             redraws,
             novelty_met: Some(novelty_met),
+            candidates: searched.as_ref().map(|s| s.0),
+            targets_met: searched.as_ref().map(|s| s.1),
+            anatomy: searched.as_ref().and_then(|s| s.2.clone()),
             ..Provenance::new(&model, &generated, args.seed, shape, args.resolution, units)
         };
         let mesh = match args.units {
@@ -214,6 +306,29 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
                 ", below --min-novelty"
             },
         ));
+        if let (Some(targets), Some((candidates, met, anatomy))) = (&targets, &searched) {
+            let values: Vec<String> = targets
+                .iter()
+                .map(|(m, _)| {
+                    let v = anatomy.as_ref().and_then(|a| m.value(a));
+                    format!(
+                        "{} {}",
+                        m.name(),
+                        v.map_or("unmeasured".into(), |v| format!("{v:.2}"))
+                    )
+                })
+                .collect();
+            let line = report.last_mut().expect("a line was just pushed");
+            line.push_str(&format!(
+                "; {}; {candidates} candidates, {}",
+                values.join(", "),
+                if *met {
+                    "targets met"
+                } else {
+                    "targets NOT met (closest kept)"
+                }
+            ));
+        }
         match &bar {
             Some(bar) => bar.inc(1),
             None => tracing::info!(

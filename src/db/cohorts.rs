@@ -27,6 +27,10 @@ pub struct NewCohort<'a> {
     pub selection: &'a str,
     /// Smallest accepted Chamfer distance to a training shape.
     pub min_novelty: Option<f64>,
+    /// Target ranges of anatomical measurements (JSON), if any.
+    pub targets: Option<&'a str>,
+    /// Most candidates per shape when targets are set.
+    pub max_candidates: Option<i64>,
     /// Client-chosen retry key.
     pub idempotency_key: Option<&'a str>,
     /// Hash of the canonical request.
@@ -62,6 +66,14 @@ pub struct CohortRow {
     pub min_novelty: Option<f64>,
     /// Redraws over the stored shapes.
     pub redraws_total: i64,
+    /// Target ranges of anatomical measurements (JSON), if any.
+    pub targets: Option<String>,
+    /// Most candidates per shape when targets are set.
+    pub max_candidates: Option<i64>,
+    /// Candidates drawn over the stored shapes (targeted cohorts).
+    pub candidates_total: i64,
+    /// Stored shapes that miss a target (the closest candidate was kept).
+    pub targets_not_met: i64,
     /// Hash of the request (idempotency checks).
     pub request_hash: String,
     /// The job's status.
@@ -82,6 +94,11 @@ const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity
         c.weights, c.seed, c.resolution, c.latent_noise, c.selection, c.min_novelty,
         (select coalesce(sum(s.redraws), 0) from shape s where s.cohort_id = c.cohort_id)
             as redraws_total,
+        c.targets, c.max_candidates,
+        (select coalesce(sum(s.candidates), 0) from shape s where s.cohort_id = c.cohort_id)
+            as candidates_total,
+        (select count(*) from shape s where s.cohort_id = c.cohort_id and s.targets_met = 0)
+            as targets_not_met,
         c.request_hash, j.status,
         (select count(*) from shape s where s.cohort_id = c.cohort_id) as shapes_done,
         j.error, c.created_at, j.started_at, j.finished_at
@@ -94,8 +111,9 @@ pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Res
         .map(|w| serde_json::to_string(w).expect("f64 slices serialise"));
     sqlx::query_scalar(
         "insert into cohort (model_id, job_id, count, arity, weighting, weights, seed,
-             resolution, latent_noise, selection, min_novelty, idempotency_key, request_hash)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) returning cohort_id",
+             resolution, latent_noise, selection, min_novelty, idempotency_key, request_hash,
+             targets, max_candidates)
+         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) returning cohort_id",
     )
     .bind(c.model_id)
     .bind(c.job_id)
@@ -110,6 +128,8 @@ pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Res
     .bind(c.min_novelty)
     .bind(c.idempotency_key)
     .bind(c.request_hash)
+    .bind(c.targets)
+    .bind(c.max_candidates)
     .fetch_one(conn)
     .await
 }

@@ -95,3 +95,26 @@ pub async fn delete(pool: &SqlitePool, model_id: &str) -> sqlx::Result<bool> {
         .await?;
     Ok(done.rows_affected() == 1)
 }
+
+/// The model's stored training-shape measurements (JSON), if computed.
+pub async fn training_anatomy(pool: &SqlitePool, model_id: &str) -> sqlx::Result<Option<String>> {
+    sqlx::query_scalar("select training_anatomy from model where model_id = ?")
+        .bind(model_id)
+        .fetch_optional(pool)
+        .await
+        .map(Option::flatten)
+}
+
+/// Stores the model's training-shape measurements (JSON).
+pub async fn set_training_anatomy(
+    pool: &SqlitePool,
+    model_id: &str,
+    json: &str,
+) -> sqlx::Result<()> {
+    sqlx::query("update model set training_anatomy = ? where model_id = ?")
+        .bind(json)
+        .bind(model_id)
+        .execute(pool)
+        .await?;
+    Ok(())
+}

@@ -53,6 +53,10 @@ pub struct NewShape<'a> {
     pub anatomy: Option<&'a str>,
     /// Why the measurements failed.
     pub anatomy_error: Option<&'a str>,
+    /// Candidates drawn (targeted cohorts).
+    pub candidates: Option<i64>,
+    /// Whether the kept shape meets every target (targeted cohorts).
+    pub targets_met: Option<bool>,
 }
 
 /// A shape's metadata (everything but the mesh bytes).
@@ -112,6 +116,10 @@ pub struct ShapeRow {
     pub anatomy: Option<String>,
     /// Why the measurements failed.
     pub anatomy_error: Option<String>,
+    /// Candidates drawn (targeted cohorts).
+    pub candidates: Option<i64>,
+    /// Whether the kept shape meets every target (targeted cohorts).
+    pub targets_met: Option<bool>,
     /// Commit time.
     pub created_at: String,
 }
@@ -140,7 +148,7 @@ const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
         s.vertex_count, s.triangle_count, s.area_mm2, s.volume_mm3,
         s.centre_x, s.centre_y, s.centre_z, s.radius, s.mesh_sha256, s.latent_noise,
         s.selection, s.attempt, s.redraws, s.novelty_cd, s.nearest_training_index,
-        s.novelty_met, s.anatomy, s.anatomy_error, s.created_at
+        s.novelty_met, s.anatomy, s.anatomy_error, s.candidates, s.targets_met, s.created_at
     from shape s join cohort c on c.cohort_id = s.cohort_id";
 
 /// Inserts a shape inside the caller's transaction.
@@ -152,8 +160,9 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
              software_version, vertex_count, triangle_count, area_mm2, volume_mm3,
              centre_x, centre_y, centre_z, radius, mesh, mesh_sha256, latent_noise, selection,
              attempt, redraws, novelty_cd, nearest_training_index, novelty_met, anatomy,
-             anatomy_error)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
+             anatomy_error, candidates, targets_met)
+         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,
+             ?, ?)
          returning shape_id",
     )
     .bind(s.cohort_id)
@@ -182,6 +191,8 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
     .bind(s.novelty_met)
     .bind(s.anatomy)
     .bind(s.anatomy_error)
+    .bind(s.candidates)
+    .bind(s.targets_met)
     .fetch_one(conn)
     .await
 }
@@ -290,12 +301,17 @@ pub struct ScienceRow {
     pub redraws: i64,
     /// Anatomical measurements (JSON).
     pub anatomy: Option<String>,
+    /// Candidates drawn (targeted cohorts).
+    pub candidates: Option<i64>,
+    /// Whether the kept shape meets every target (targeted cohorts).
+    pub targets_met: Option<bool>,
 }
 
 /// Novelty and anatomy of a cohort's shapes in index order.
 pub async fn cohort_science(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<ScienceRow>> {
     sqlx::query_as(
-        "select shape_id, novelty_cd, nearest_training_index, novelty_met, redraws, anatomy
+        "select shape_id, novelty_cd, nearest_training_index, novelty_met, redraws, anatomy,
+             candidates, targets_met
          from shape where cohort_id = ? order by shape_index",
     )
     .bind(cohort_id)

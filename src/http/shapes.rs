@@ -85,6 +85,11 @@ pub struct Provenance {
     pub selection: String,
     /// Which draw was kept (0 = the first); `seed` is that draw's seed.
     pub attempt: i64,
+    /// Candidates drawn to meet the cohort's targets (null without targets).
+    pub candidates: Option<i64>,
+    /// Whether the shape meets every target of its cohort (null without targets); false
+    /// when no candidate did and the closest was kept.
+    pub targets_met: Option<bool>,
 }
 
 /// A unit-ball transform.
@@ -115,6 +120,8 @@ impl ShapeView {
                 latent_noise: s.latent_noise,
                 selection: s.selection,
                 attempt: s.attempt,
+                candidates: s.candidates,
+                targets_met: s.targets_met,
             },
             vertex_count: s.vertex_count,
             triangle_count: s.triangle_count,

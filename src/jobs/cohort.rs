@@ -10,11 +10,13 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::engine::{GeneratedShape, ModelInfo, ShapeSpec};
+use super::conditioned::{ShapeSearch, Targeting, search_shape, training_anatomy};
+use super::engine::{CohortEngine, GeneratedShape, ModelInfo, ShapeSpec};
 use super::plan::{CohortPlan, Weighting};
 use super::priority::spawn_background;
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
-use crate::anatomy::shape::measure_shape;
+use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
+use crate::anatomy::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, Targets};
 use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
 use crate::sdf::generate::MAX_REDRAWS;
 use crate::sdf::generate::Selection;
@@ -106,12 +108,71 @@ pub(super) async fn run(
             }
         },
     };
+    let targeting = match (&cohort.targets, missing.is_empty()) {
+        (Some(json), false) => match targeting(ctx, &cohort, &model, &info, json).await {
+            Ok(t) => Some(Arc::new(t)),
+            Err(e) => {
+                if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
+                    return Ok(stop);
+                }
+                return Ok(RunOutcome::Failed(format!("targets: {e:#}")));
+            }
+        },
+        _ => None,
+    };
     let attempts = match cohort.min_novelty {
         Some(_) => MAX_REDRAWS + 1,
         None => 1,
     };
     for index in missing {
         let reference = reference.clone().context("no novelty reference")?;
+        if let Some(targeting) = &targeting {
+            if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
+                return Ok(stop);
+            }
+            let search = ShapeSearch {
+                engine: ctx.engine.clone(),
+                model_dir: model_dir.clone(),
+                plan: plan.clone(),
+                targeting: targeting.clone(),
+                reference,
+                min_novelty: cohort.min_novelty,
+                cancel: flag.clone(),
+            };
+            let searched = match search_shape(search, index as u64).await {
+                Ok(s) => s,
+                Err(e) => {
+                    if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
+                        return Ok(stop);
+                    }
+                    return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}")));
+                }
+            };
+            let kept = searched.kept;
+            let outcome = Outcome {
+                redraws: 0,
+                novelty_met: cohort
+                    .min_novelty
+                    .is_none_or(|m| kept.candidate.novelty.chamfer >= m),
+                candidates: Some(i64::from(searched.candidates)),
+                targets_met: Some(searched.met),
+            };
+            let finished = match finish(kept.candidate, Some(kept.anatomy)).await {
+                Ok(f) => f,
+                Err(e) => return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}"))),
+            };
+            done += 1;
+            commit_shape(ctx, job.job_id, &cohort, index, &finished, &outcome, done).await?;
+            ctx.metrics.inc_shapes_generated();
+            tracing::debug!(
+                index,
+                done,
+                candidates = searched.candidates,
+                met = searched.met,
+                "targeted shape committed"
+            );
+            continue;
+        }
         let mut best: Option<Candidate> = None;
         let mut redraws = 0;
         for attempt in 0..attempts {
@@ -155,7 +216,7 @@ pub(super) async fn run(
         }
         let best = best.context("no draw was made")?;
         let met = cohort.min_novelty.is_none_or(|m| best.novelty.chamfer >= m);
-        let finished = match finish(best).await {
+        let finished = match finish(best, None).await {
             Ok(f) => f,
             Err(e) => return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}"))),
         };
@@ -163,6 +224,8 @@ pub(super) async fn run(
         let outcome = Outcome {
             redraws: i64::from(redraws),
             novelty_met: met,
+            candidates: None,
+            targets_met: None,
         };
         commit_shape(ctx, job.job_id, &cohort, index, &finished, &outcome, done).await?;
         ctx.metrics.inc_shapes_generated();
@@ -180,12 +243,43 @@ pub(super) async fn run(
     Ok(RunOutcome::Succeeded)
 }
 
+/// The search settings of a targeted cohort, with the model's training measurements
+/// (stored with the model when the cohort was accepted).
+async fn targeting(
+    ctx: &JobContext,
+    cohort: &CohortRow,
+    model: &db::models::ModelRow,
+    info: &ModelInfo,
+    json: &str,
+) -> anyhow::Result<Targeting> {
+    let ranges: std::collections::BTreeMap<String, TargetRange> =
+        serde_json::from_str(json).context("stored targets are not JSON")?;
+    let targets = Targets::parse(&ranges)?;
+    let training = training_anatomy(
+        &ctx.pool,
+        ctx.engine.clone(),
+        &model.model_id,
+        std::path::Path::new(&model.dir_path),
+        info.training_shape_count(),
+    )
+    .await?;
+    let max_candidates = cohort.max_candidates.map_or(DEFAULT_MAX_CANDIDATES, |m| {
+        m.clamp(1, i64::from(u32::MAX)) as u32
+    });
+    Ok(Targeting::new(
+        targets,
+        max_candidates,
+        &training,
+        cohort.arity as usize,
+    ))
+}
+
 /// One draw of a shape with its distance to the training set.
-struct Candidate {
-    spec: ShapeSpec,
-    shape: GeneratedShape,
-    novelty: Novelty,
-    attempt: u32,
+pub(super) struct Candidate {
+    pub(super) spec: ShapeSpec,
+    pub(super) shape: GeneratedShape,
+    pub(super) novelty: Novelty,
+    pub(super) attempt: u32,
 }
 
 /// The kept draw, encoded for storage and measured.
@@ -201,6 +295,10 @@ struct Finished {
 struct Outcome {
     redraws: i64,
     novelty_met: bool,
+    /// Candidates drawn (targeted cohorts).
+    candidates: Option<i64>,
+    /// Whether the kept shape meets every target (targeted cohorts).
+    targets_met: Option<bool>,
 }
 
 /// The model's training surfaces at the cohort's resolution, off the executor.
@@ -227,40 +325,56 @@ async fn generate(
     flag: Arc<AtomicBool>,
 ) -> anyhow::Result<Candidate> {
     let engine = ctx.engine.clone();
-    spawn_background(move || {
-        let shape = engine.generate_shape(&model_dir, &spec, &flag)?;
-        shape
-            .mesh_unit
-            .validate()
-            .context("engine returned an invalid mesh")?;
-        let novelty = reference
-            .novelty(&shape.mesh_unit, spec.seed)
-            .context("novelty")?;
-        anyhow::ensure!(
-            novelty.chamfer.is_finite() && novelty.nearest < reference.len(),
-            "novelty is not a finite distance to a training shape"
-        );
-        Ok(Candidate {
-            spec,
-            shape,
-            novelty,
-            attempt: 0,
-        })
-    })
-    .await
-    .map_err(join_error)?
+    spawn_background(move || draw(&*engine, &model_dir, spec, &reference, &flag))
+        .await
+        .map_err(join_error)?
 }
 
-/// Encodes the kept draw and measures its anatomy in mm, off the executor.
-async fn finish(candidate: Candidate) -> anyhow::Result<Finished> {
+/// Generates one draw and measures its novelty (blocking).
+pub(super) fn draw(
+    engine: &dyn CohortEngine,
+    model_dir: &std::path::Path,
+    spec: ShapeSpec,
+    reference: &NoveltyReference,
+    flag: &AtomicBool,
+) -> anyhow::Result<Candidate> {
+    let shape = engine.generate_shape(model_dir, &spec, flag)?;
+    shape
+        .mesh_unit
+        .validate()
+        .context("engine returned an invalid mesh")?;
+    let novelty = reference
+        .novelty(&shape.mesh_unit, spec.seed)
+        .context("novelty")?;
+    anyhow::ensure!(
+        novelty.chamfer.is_finite() && novelty.nearest < reference.len(),
+        "novelty is not a finite distance to a training shape"
+    );
+    Ok(Candidate {
+        spec,
+        shape,
+        novelty,
+        attempt: 0,
+    })
+}
+
+/// Encodes the kept draw and measures its anatomy in mm (unless `measured` already holds
+/// it), off the executor.
+async fn finish(
+    candidate: Candidate,
+    measured: Option<Result<ShapeAnatomy, String>>,
+) -> anyhow::Result<Finished> {
     spawn_background(move || {
         let blob = mesh_blob::encode(&candidate.shape.mesh_unit);
         let sha = hex(&Sha256::digest(&blob));
         let shape = &candidate.shape;
-        let mesh_mm = shape.transform.mesh_to_mesh_units(&shape.mesh_unit);
-        let anatomy = match measure_shape(&mesh_mm) {
+        let measured = measured.unwrap_or_else(|| {
+            let mesh_mm = shape.transform.mesh_to_mesh_units(&shape.mesh_unit);
+            measure_shape(&mesh_mm).map_err(|e| e.to_string())
+        });
+        let anatomy = match measured {
             Ok(a) => Ok(serde_json::to_string(&a)?),
-            Err(e) => Err(e.to_string()),
+            Err(e) => Err(e),
         };
         Ok(Finished {
             candidate,
@@ -314,6 +428,8 @@ async fn commit_shape(
         novelty_met: Some(outcome.novelty_met),
         anatomy: finished.anatomy.as_deref().ok(),
         anatomy_error: finished.anatomy.as_ref().err().map(String::as_str),
+        candidates: outcome.candidates,
+        targets_met: outcome.targets_met,
     };
     let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
     db::shapes::insert(&mut tx, &row)

@@ -3,6 +3,7 @@
 //! `spawn_blocking`; a panic there fails the job, never the worker.
 
 pub mod cohort;
+pub mod conditioned;
 pub mod engine;
 pub mod plan;
 pub mod priority;

@@ -492,9 +492,31 @@ pub fn generate_shape_with(
     extraction: ExtractionMethod,
 ) -> Result<GeneratedShape, GenerateError> {
     let mixture = spec.mixture_with(latents, diversity.selection, seed, shape, attempt)?;
+    generate_from_mixture(
+        model,
+        latents,
+        mixture,
+        diversity.latent_noise,
+        (seed, shape, attempt),
+        resolution,
+        extraction,
+    )
+}
+
+/// Meshes a given mixture of draw `attempt` of `(seed, shape, attempt)` (the latent noise
+/// is drawn from the same seed as in [`generate_shape_with`]).
+pub fn generate_from_mixture(
+    model: &LoadedModel,
+    latents: &[Vec<f32>],
+    mixture: Mixture,
+    latent_noise: f64,
+    (seed, shape, attempt): (u64, u64, u32),
+    resolution: usize,
+    extraction: ExtractionMethod,
+) -> Result<GeneratedShape, GenerateError> {
     let transform = mixture.mix_transforms(&model.manifest.transforms())?;
     let noise_seed = attempt_seed(seed ^ shape.rotate_left(32), attempt);
-    let latent = noisy_latent(&mixture, latents, diversity.latent_noise, noise_seed);
+    let latent = noisy_latent(&mixture, latents, latent_noise, noise_seed);
     let field = model.field(&latent).map_err(ReconstructError::from)?;
     let mesh = reconstruct(&field, resolution, extraction)?.mesh;
     Ok(GeneratedShape {
@@ -550,6 +572,15 @@ pub struct Provenance {
     /// False when no draw reached the requested minimum novelty (the most novel was kept).
     #[serde(default)]
     pub novelty_met: Option<bool>,
+    /// Candidates drawn to meet the anatomical targets (absent without targets).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub candidates: Option<u32>,
+    /// Whether the shape meets every target (false: no candidate did, the closest was kept).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub targets_met: Option<bool>,
+    /// The shape's anatomical measurements in mm, when targets were searched.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub anatomy: Option<crate::anatomy::shape::ShapeAnatomy>,
 }
 
 impl Provenance {
@@ -587,6 +618,9 @@ impl Provenance {
             novelty: None,
             redraws: 0,
             novelty_met: None,
+            candidates: None,
+            targets_met: None,
+            anatomy: None,
         }
     }
 }

@@ -28,6 +28,7 @@ pub use step::{SdfTrainer, TrainStepConfig, TrainStepOutput};
 
 pub mod batch;
 pub mod cache;
+pub mod conditioned;
 pub mod config;
 pub mod data;
 pub mod evaluation;

@@ -3,6 +3,7 @@
 
 mod access;
 mod cohorts;
+mod conditioned;
 mod conformance;
 mod engine;
 mod errors;

@@ -1,8 +1,11 @@
 //! Cohort request and response bodies, and the request rules of DESIGN §4.
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use crate::anatomy::targets::{MAX_CANDIDATES, TargetRange, Targets};
 use crate::db::cohorts::CohortRow;
 use crate::db::shapes::MeasureSummary;
 use crate::http::error::ApiError;
@@ -53,6 +56,19 @@ pub struct CreateCohort {
     /// novel draw is kept and flagged `novelty_met: false`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_novelty: Option<f64>,
+    /// Target ranges (mm) of anatomical measurements, keyed by name: `annulus_mm`,
+    /// `sinus_mm`, `stj_mm`, `sinus_height_mm`, `ascending_mm`, `length_mm`,
+    /// `max_diameter_mm`; each `{"min": …, "max": …}` with at least one bound, both ≥ 0.
+    /// Each shape then searches up to `max_candidates` mixtures for one inside every range;
+    /// when none is, the closest is kept and flagged `targets_met: false`. A target outside
+    /// what the model's training shapes reach (their range widened by 5 % of the largest
+    /// value) is refused with the achievable range.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(example = json!({"annulus_mm": {"min": 23.0, "max": 27.0}}))]
+    pub targets: Option<BTreeMap<String, TargetRange>>,
+    /// Most candidates drawn per shape when `targets` is set: 1–100, default 20.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_candidates: Option<i64>,
 }
 
 impl CreateCohort {
@@ -95,7 +111,28 @@ impl CreateCohort {
                 return Err(ApiError::invalid(field, "non-negative", msg));
             }
         }
+        self.targets()?;
         Ok(())
+    }
+
+    /// The validated targets, if any, and the candidate bound's rules.
+    pub fn targets(&self) -> Result<Option<Targets>, ApiError> {
+        if let Some(m) = self.max_candidates {
+            if !(1..=i64::from(MAX_CANDIDATES)).contains(&m) {
+                let msg = format!("must be between 1 and {MAX_CANDIDATES}, got {m}");
+                return Err(ApiError::invalid("max_candidates", "range", msg));
+            }
+            if self.targets.is_none() {
+                let msg = "applies to targeted cohorts only; give targets too";
+                return Err(ApiError::invalid("max_candidates", "requires-targets", msg));
+            }
+        }
+        let Some(ranges) = &self.targets else {
+            return Ok(None);
+        };
+        Targets::parse(ranges)
+            .map(Some)
+            .map_err(|e| ApiError::invalid(e.field(), e.rule(), e.to_string()))
     }
 
     /// Rules against the model: arity within its training shapes.
@@ -162,6 +199,16 @@ pub struct CohortView {
     pub min_novelty: Option<f64>,
     /// Redraws over the stored shapes (shapes closer than `min_novelty` to a training shape).
     pub redraws_total: i64,
+    /// Target ranges of anatomical measurements (mm), if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub targets: Option<BTreeMap<String, TargetRange>>,
+    /// Most candidates per shape (targeted cohorts).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_candidates: Option<i64>,
+    /// Candidates drawn over the stored shapes (targeted cohorts; 0 otherwise).
+    pub candidates_total: i64,
+    /// Stored shapes that miss a target: no candidate met every range, the closest was kept.
+    pub targets_not_met: i64,
     /// The job generating it.
     pub job_id: i64,
     /// Error chain when failed.
@@ -237,6 +284,10 @@ impl CohortView {
             selection: Selection::parse(&c.selection).unwrap_or_default(),
             min_novelty: c.min_novelty,
             redraws_total: c.redraws_total,
+            targets: c.targets.and_then(|t| serde_json::from_str(&t).ok()),
+            max_candidates: c.max_candidates,
+            candidates_total: c.candidates_total,
+            targets_not_met: c.targets_not_met,
             job_id: c.job_id,
             error: c.error,
             created_at: c.created_at,

@@ -10,6 +10,7 @@ use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
 use crate::anatomy::shape::ShapeAnatomy;
+use crate::anatomy::targets::{Measurement, TargetRange};
 use crate::db;
 use crate::http::AppState;
 use crate::http::error::{ApiError, Problem, Result};
@@ -68,6 +69,28 @@ pub struct AnatomyMetrics {
     pub sinus_height_mm: Option<ValueSummary>,
     /// Centreline length.
     pub length_mm: Option<ValueSummary>,
+    /// Each target of a conditioned cohort with the share of shapes inside it (empty
+    /// without targets).
+    pub targets: Vec<TargetMetrics>,
+    /// Candidates drawn over the shapes (targeted cohorts; 0 otherwise).
+    pub candidates_total: i64,
+}
+
+/// How a cohort's shapes sit against one target range.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct TargetMetrics {
+    /// Measurement name (e.g. `annulus_mm`).
+    pub measurement: String,
+    /// The target range (mm).
+    pub target: TargetRange,
+    /// Shapes with this measurement.
+    pub measured: i64,
+    /// Of those, shapes inside the range.
+    pub inside: i64,
+    /// `inside` over all the cohort's shapes (a shape without the measurement is outside).
+    pub fraction_inside: f64,
+    /// Achieved distribution of the measurement (null when no shape has it).
+    pub achieved: Option<ValueSummary>,
 }
 
 /// Novelty of a cohort's shapes against the model's training shapes.
@@ -155,7 +178,8 @@ pub(super) async fn get_cohort_metrics(
         matrix: with_matrix.then_some(matrix),
         computed_at: row.created_at,
         novelty,
-        anatomy: anatomy_metrics(&science).map_err(anyhow::Error::from)?,
+        anatomy: anatomy_metrics(&science, cohort.targets.as_deref())
+            .map_err(anyhow::Error::from)?,
     })
     .into_response())
 }
@@ -186,12 +210,38 @@ fn novelty_metrics(
     }
 }
 
-fn anatomy_metrics(shapes: &[db::shapes::ScienceRow]) -> serde_json::Result<AnatomyMetrics> {
+fn anatomy_metrics(
+    shapes: &[db::shapes::ScienceRow],
+    targets: Option<&str>,
+) -> serde_json::Result<AnatomyMetrics> {
     let measured: Vec<ShapeAnatomy> = shapes
         .iter()
         .filter_map(|s| s.anatomy.as_deref())
         .map(serde_json::from_str)
         .collect::<serde_json::Result<_>>()?;
+    let ranges: std::collections::BTreeMap<String, TargetRange> = match targets {
+        Some(json) => serde_json::from_str(json)?,
+        None => Default::default(),
+    };
+    let targets = ranges
+        .into_iter()
+        .filter_map(|(name, target)| {
+            let m = Measurement::parse(&name)?;
+            let values: Vec<f64> = measured.iter().filter_map(|a| m.value(a)).collect();
+            let inside = values.iter().filter(|&&v| target.contains(v)).count() as i64;
+            Some(TargetMetrics {
+                measurement: name,
+                target,
+                measured: values.len() as i64,
+                inside,
+                fraction_inside: match shapes.len() {
+                    0 => 0.0,
+                    n => inside as f64 / n as f64,
+                },
+                achieved: summarize_values(values),
+            })
+        })
+        .collect();
     let summary = |f: fn(&ShapeAnatomy) -> Option<f64>| {
         summarize_values(measured.iter().filter_map(f).collect())
     };
@@ -204,6 +254,8 @@ fn anatomy_metrics(shapes: &[db::shapes::ScienceRow]) -> serde_json::Result<Anat
         stj_mm: summary(|a| a.stj_mm),
         sinus_height_mm: summary(|a| a.sinus_height_mm),
         length_mm: summary(|a| Some(a.length_mm)),
+        targets,
+        candidates_total: shapes.iter().filter_map(|s| s.candidates).sum(),
     })
 }
 

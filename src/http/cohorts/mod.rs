@@ -13,8 +13,10 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extract::{ApiJson, ApiQuery, parse_id};
+use crate::anatomy::targets::{DEFAULT_MAX_CANDIDATES, check_feasible};
 use crate::db::{self, cohorts::CohortRow, jobs::CancelOutcome};
 use crate::jobs::cohort::CohortPayload;
+use crate::jobs::conditioned::training_anatomy;
 use crate::jobs::engine::ModelInfo;
 use crate::jobs::plan::Weighting;
 use dto::{CohortSummary, CohortView, CreateCohort, DEFAULT_RESOLUTION};
@@ -40,7 +42,7 @@ pub(super) fn router() -> OpenApiRouter<AppState> {
         (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown model"),
         (status = 413, body = Problem, content_type = "application/problem+json", description = "Body over the JSON size limit"),
         (status = 415, body = Problem, content_type = "application/problem+json"),
-        (status = 422, body = Problem, content_type = "application/problem+json", description = "A rule is broken, e.g. `count` over the work budget `count × resolution³`"),
+        (status = 422, body = Problem, content_type = "application/problem+json", description = "A rule is broken, e.g. `count` over the work budget `count × resolution³`, or a target the model cannot reach (rule `feasible`, naming the achievable range)"),
         (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After"),
     ))]
 async fn create_cohort(
@@ -62,6 +64,20 @@ async fn create_cohort(
     let info: ModelInfo = serde_json::from_str(&model.manifest)
         .map_err(|e| anyhow::anyhow!("model {} has a bad manifest: {e}", model.model_id))?;
     req.check_against(&info)?;
+    let targets = req.targets()?;
+    if let Some(targets) = &targets {
+        let training = training_anatomy(
+            &state.pool,
+            state.jobs.engine.clone(),
+            &model.model_id,
+            std::path::Path::new(&model.dir_path),
+            info.training_shape_count(),
+        )
+        .await?;
+        check_feasible(targets, &training.shapes)
+            .map_err(|e| ApiError::invalid(e.field(), "feasible", e.to_string()))?;
+    }
+    let targets_json = targets.map(|t| serde_json::to_string(&t.to_map()).expect("maps serialise"));
     let fingerprint = req.fingerprint();
 
     let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
@@ -100,6 +116,11 @@ async fn create_cohort(
             latent_noise: req.latent_noise.unwrap_or(0.0),
             selection: req.selection.unwrap_or_default().as_str(),
             min_novelty: req.min_novelty,
+            targets: targets_json.as_deref(),
+            max_candidates: targets_json.is_some().then(|| {
+                req.max_candidates
+                    .unwrap_or(i64::from(DEFAULT_MAX_CANDIDATES))
+            }),
             idempotency_key: key.as_deref(),
             request_hash: &fingerprint,
         },

@@ -1,0 +1,293 @@
+//! Conditioned cohorts: target ranges for anatomical measurements, their validation and
+//! feasibility, and the bounded per-shape candidate search.
+
+use std::sync::atomic::Ordering;
+
+use aortagen::anatomy::shape::measure_shape;
+use aortagen::geometry::normalize::UnitBallTransform;
+use axum::http::StatusCode;
+use serde_json::{Value, json};
+
+use crate::engine::{CENTRE_MM, TRAINING_SHAPES, ellipsoid_unit, training_axes};
+use crate::helpers::{TestApp, cohort_body, spawn_app};
+
+fn body_with(extra: Value) -> Value {
+    let mut body = cohort_body(4, 2);
+    for (k, v) in extra.as_object().unwrap() {
+        body[k] = v.clone();
+    }
+    body
+}
+
+/// Centreline lengths (mm) of the analytic training ellipsoids, measured as the service
+/// measures them.
+fn training_lengths() -> Vec<f64> {
+    (0..TRAINING_SHAPES)
+        .map(|i| {
+            let axes = training_axes(i);
+            let radius = axes.iter().cloned().fold(0.0, f64::max);
+            let transform = UnitBallTransform {
+                centre: CENTRE_MM,
+                radius,
+            };
+            let mesh = transform.mesh_to_mesh_units(&ellipsoid_unit(axes, radius));
+            measure_shape(&mesh)
+                .expect("an ellipsoid measures")
+                .length_mm
+        })
+        .collect()
+}
+
+async fn shapes(app: &TestApp, cohort: i64) -> Vec<Value> {
+    let page = app
+        .get(&format!("/v1/cohorts/{cohort}/shapes"))
+        .await
+        .json();
+    let mut out = Vec::new();
+    for item in page["items"].as_array().unwrap() {
+        let r = app.get(&format!("/v1/shapes/{}", item["id"])).await;
+        assert_eq!(r.status, StatusCode::OK);
+        out.push(r.json());
+    }
+    out
+}
+
+#[tokio::test]
+async fn bad_targets_are_rejected_naming_the_field_and_rule() {
+    let app = spawn_app().await;
+    let cases = [
+        (json!({ "targets": {} }), "targets", "non-empty"),
+        (
+            json!({ "targets": { "aorta_mm": { "min": 1.0 } } }),
+            "targets.aorta_mm",
+            "unknown-measurement",
+        ),
+        (
+            json!({ "targets": { "length_mm": { "min": 80.0, "max": 60.0 } } }),
+            "targets.length_mm",
+            "min-le-max",
+        ),
+        (
+            json!({ "targets": { "length_mm": { "min": -1.0 } } }),
+            "targets.length_mm.min",
+            "non-negative",
+        ),
+        (
+            json!({ "targets": { "length_mm": { "max": "NaN" } } }),
+            "targets.length_mm.max",
+            "type",
+        ),
+        (
+            json!({ "targets": { "length_mm": {} } }),
+            "targets.length_mm",
+            "bound-required",
+        ),
+        (
+            json!({ "targets": { "length_mm": { "min": 1.0, "mx": 2.0 } } }),
+            "targets.length_mm.mx",
+            "unknown-field",
+        ),
+        (
+            json!({ "targets": { "length_mm": { "min": 1.0 } }, "max_candidates": 0 }),
+            "max_candidates",
+            "range",
+        ),
+        (
+            json!({ "targets": { "length_mm": { "min": 1.0 } }, "max_candidates": 101 }),
+            "max_candidates",
+            "range",
+        ),
+        (
+            json!({ "max_candidates": 5 }),
+            "max_candidates",
+            "requires-targets",
+        ),
+    ];
+    for (extra, field, rule) in cases {
+        let r = app.create_cohort(&body_with(extra.clone())).await;
+        assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY, "{extra}");
+        assert_eq!(r.header("content-type"), Some("application/problem+json"));
+        let p = r.json();
+        assert_eq!(
+            (p["field"].as_str(), p["rule"].as_str()),
+            (Some(field), Some(rule)),
+            "{p}"
+        );
+    }
+    assert_eq!(app.count("cohort").await, 0);
+}
+
+#[tokio::test]
+async fn an_impossible_target_is_refused_with_the_achievable_range() {
+    let app = spawn_app().await;
+    let lengths = training_lengths();
+    let longest = lengths.iter().cloned().fold(0.0, f64::max);
+    let shortest = lengths.iter().cloned().fold(f64::INFINITY, f64::min);
+    // Beyond the 5 % margin above the longest training shape.
+    let min = (longest * 1.06).ceil();
+    let body = body_with(json!({ "targets": { "length_mm": { "min": min } } }));
+    let r = app.create_cohort(&body).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    let p = r.json();
+    assert_eq!(
+        (p["field"].as_str(), p["rule"].as_str()),
+        (Some("targets.length_mm"), Some("feasible")),
+        "{p}"
+    );
+    let detail = p["detail"].as_str().unwrap();
+    let achievable = format!(
+        "[{:.2}, {:.2}] mm",
+        shortest - 0.05 * longest,
+        longest + 0.05 * longest
+    );
+    assert!(detail.contains(&achievable), "{detail} lacks {achievable}");
+    assert_eq!(app.count("cohort").await, 0);
+    // The training shapes were measured once and stored with the model.
+    let calls = app.engine.calls.load(Ordering::SeqCst);
+    assert_eq!(calls, TRAINING_SHAPES);
+    let r = app.create_cohort(&body).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(app.engine.calls.load(Ordering::SeqCst), calls);
+}
+
+#[tokio::test]
+async fn a_feasible_target_is_met_by_every_shape_and_reported() {
+    let app = spawn_app().await;
+    let mut lengths = training_lengths();
+    lengths.sort_by(f64::total_cmp);
+    // The middle of the training range: plain draws of two shapes often miss it.
+    let (lo, hi) = (lengths[1], lengths[3]);
+    let targets = json!({ "length_mm": { "min": lo, "max": hi } });
+    let body = body_with(json!({ "count": 5, "targets": targets, "max_candidates": 20 }));
+    let id = app.create_cohort_ok(&body).await;
+    app.run_pending_jobs().await;
+    let c = app.get(&format!("/v1/cohorts/{id}")).await.json();
+    assert_eq!(c["status"], "succeeded", "{c}");
+    assert_eq!(c["targets"], targets);
+    assert_eq!(c["max_candidates"], 20);
+
+    let shapes = shapes(&app, id).await;
+    let mut total = 0;
+    let mut met = 0;
+    for s in &shapes {
+        let prov = &s["provenance"];
+        let candidates = prov["candidates"].as_i64().unwrap();
+        assert!((1..=20).contains(&candidates), "{s}");
+        total += candidates;
+        let length = s["anatomy"]["length_mm"].as_f64().unwrap();
+        let inside = (lo..=hi).contains(&length);
+        assert_eq!(prov["targets_met"].as_bool(), Some(inside), "{s}");
+        met += i64::from(inside);
+    }
+    assert_eq!(met, 5, "every shape should meet the target: {shapes:?}");
+    assert!(
+        total > 5,
+        "the band is narrow enough that some shapes search: {total}"
+    );
+    assert_eq!(c["candidates_total"].as_i64(), Some(total));
+    assert_eq!(c["targets_not_met"].as_i64(), Some(0));
+
+    let anatomy = &app.get(&format!("/v1/cohorts/{id}/metrics")).await.json()["anatomy"];
+    assert_eq!(
+        anatomy["candidates_total"].as_i64(),
+        Some(total),
+        "{anatomy}"
+    );
+    let t = &anatomy["targets"][0];
+    assert_eq!(t["measurement"], "length_mm");
+    assert_eq!(t["target"], targets["length_mm"]);
+    assert_eq!(
+        (t["inside"].as_i64(), t["measured"].as_i64()),
+        (Some(5), Some(5))
+    );
+    assert_eq!(t["fraction_inside"].as_f64(), Some(1.0));
+    assert!(t["achieved"]["min"].as_f64().unwrap() >= lo, "{t}");
+    assert!(t["achieved"]["max"].as_f64().unwrap() <= hi, "{t}");
+
+    // The same request and seed give the same shapes, candidate for candidate.
+    let again = app.create_cohort_ok(&body).await;
+    app.run_pending_jobs().await;
+    let replay = crate::conditioned::shapes(&app, again).await;
+    for (a, b) in shapes.iter().zip(&replay) {
+        assert_eq!(
+            a["provenance"]["training_indices"],
+            b["provenance"]["training_indices"]
+        );
+        assert_eq!(a["provenance"]["weights"], b["provenance"]["weights"]);
+        assert_eq!(a["provenance"]["candidates"], b["provenance"]["candidates"]);
+        assert_eq!(a["provenance"]["attempt"], b["provenance"]["attempt"]);
+        assert_eq!(a["anatomy"], b["anatomy"]);
+    }
+}
+
+#[tokio::test]
+async fn an_unmet_target_is_searched_to_the_bound_and_the_closest_shape_is_flagged() {
+    let app = spawn_app().await;
+    let lengths = training_lengths();
+    let longest = lengths.iter().cloned().fold(0.0, f64::max);
+    // Inside the feasibility margin but beyond every mixture of the training shapes.
+    let min = longest * 1.03;
+    let body = body_with(json!({
+        "count": 2,
+        "resolution": 96,
+        "targets": { "length_mm": { "min": min } },
+        "max_candidates": 3
+    }));
+    let id = app.create_cohort_ok(&body).await;
+    app.run_pending_jobs().await;
+    let c = app.get(&format!("/v1/cohorts/{id}")).await.json();
+    assert_eq!(c["status"], "succeeded", "{c}");
+    assert_eq!(
+        (
+            c["candidates_total"].as_i64(),
+            c["targets_not_met"].as_i64()
+        ),
+        (Some(6), Some(2)),
+        "{c}"
+    );
+    for s in shapes(&app, id).await {
+        let prov = &s["provenance"];
+        assert_eq!(
+            (prov["candidates"].as_i64(), prov["targets_met"].as_bool()),
+            (Some(3), Some(false)),
+            "{s}"
+        );
+        assert!(s["anatomy"]["length_mm"].as_f64().unwrap() < min, "{s}");
+    }
+    // Training shapes once, then per shape three coarse screens (resolution 96 > 64) and
+    // one final mesh of the closest.
+    assert_eq!(
+        app.engine.calls.load(Ordering::SeqCst),
+        TRAINING_SHAPES + 2 * (3 + 1)
+    );
+    let t = &app.get(&format!("/v1/cohorts/{id}/metrics")).await.json()["anatomy"]["targets"][0];
+    assert_eq!(
+        (t["inside"].as_i64(), t["fraction_inside"].as_f64()),
+        (Some(0), Some(0.0))
+    );
+}
+
+#[tokio::test]
+async fn cohorts_without_targets_report_no_search() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(2, 2)).await;
+    app.run_pending_jobs().await;
+    let c = app.get(&format!("/v1/cohorts/{id}")).await.json();
+    assert!(
+        c.get("targets").is_none() && c.get("max_candidates").is_none(),
+        "{c}"
+    );
+    assert_eq!(
+        (
+            c["candidates_total"].as_i64(),
+            c["targets_not_met"].as_i64()
+        ),
+        (Some(0), Some(0))
+    );
+    for s in shapes(&app, id).await {
+        assert!(s["provenance"]["candidates"].is_null(), "{s}");
+        assert!(s["provenance"]["targets_met"].is_null(), "{s}");
+    }
+    // No training measurements were needed: one engine call per shape.
+    assert_eq!(app.engine.calls.load(Ordering::SeqCst), 2);
+}
