@@ -14,12 +14,14 @@ use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
 use crate::geometry::sampling::sample_surface;
 use crate::jobs::engine::{
-    CohortEngine, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo, TrainingSpec,
+    CohortEngine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
+    TrainingSpec,
 };
 use crate::sdf::backend::Backend;
 use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
 use crate::sdf::evaluation::EvaluationReport;
+use crate::sdf::fit::{FitSettings, fit_mesh};
 use crate::sdf::generate::{Mixture, noisy_latent};
 use crate::sdf::manifest::MANIFEST_FILE;
 use crate::sdf::novelty::{NoveltyReference, training_surfaces};
@@ -249,6 +251,46 @@ impl CohortEngine for SdfEngine {
             bail!("training was stopped before its last epoch");
         }
         self.model_info(&spec.model_dir)
+    }
+
+    fn fit_anchor(
+        &self,
+        model_dir: &Path,
+        spec: &FitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        let mesh = crate::formats::read_mesh_file(&spec.mesh_path)
+            .with_context(|| format!("cannot read {}", spec.mesh_path.display()))?;
+        mesh.validate().context("unusable mesh")?;
+        // A copy, so cohorts on the same model are not held up for the whole fit.
+        let model = {
+            let cached = self.model(model_dir)?;
+            let cached = cached
+                .lock()
+                .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+            LoadedModel {
+                dir: cached.model.dir.clone(),
+                manifest: cached.model.manifest.clone(),
+                decoder: cached.model.decoder.clone(),
+            }
+        };
+        let mut settings = FitSettings::new(spec.seed);
+        settings.iterations = spec.iterations;
+        settings.evaluation.chamfer_points = self.chamfer_points;
+        settings.evaluation.extraction = self.extraction;
+        let fitted = fit_mesh(
+            &model,
+            &mesh,
+            &settings,
+            &mut |p| progress.store(p.iteration as u64, Ordering::SeqCst),
+            Some(cancel),
+        )?;
+        Ok(FittedAnchor {
+            latent: fitted.latent,
+            transform: fitted.transform,
+            chamfer: fitted.chamfer,
+        })
     }
 }
 

@@ -87,6 +87,28 @@ pub struct TrainingSpec {
     pub epochs: Option<u64>,
 }
 
+/// A request to fit a latent to a new mesh for a trained model (network frozen).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitSpec {
+    /// The uploaded mesh file (its extension or content tells the format).
+    pub mesh_path: std::path::PathBuf,
+    /// Adam steps on the latent.
+    pub iterations: usize,
+    /// Seed of the sampling and the batches.
+    pub seed: u64,
+}
+
+/// A fitted latent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FittedAnchor {
+    /// The latent code (the model's latent dimension).
+    pub latent: Vec<f32>,
+    /// Mesh units ↔ unit ball of the fitted mesh.
+    pub transform: UnitBallTransform,
+    /// Reconstruction Chamfer distance (unit-ball coordinates, as for training shapes).
+    pub chamfer: f64,
+}
+
 /// The science engine, as the job worker calls it. Every method is blocking CPU work and is
 /// called inside `spawn_blocking`.
 pub trait CohortEngine: Send + Sync + 'static {
@@ -127,6 +149,20 @@ pub trait CohortEngine: Send + Sync + 'static {
         cancel: &AtomicBool,
         progress: &AtomicU64,
     ) -> anyhow::Result<ModelInfo>;
+
+    /// Fits a latent to the mesh in `spec.mesh_path` for the model in `model_dir`, its
+    /// network frozen. `progress` holds the steps done. Returns early with an error once
+    /// `cancel` becomes true. Engines without a trainable model refuse.
+    fn fit_anchor(
+        &self,
+        model_dir: &Path,
+        spec: &FitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        let _ = (model_dir, spec, cancel, progress);
+        anyhow::bail!("this engine cannot fit new shapes")
+    }
 }
 
 /// An engine that refuses every call: what the service runs on when no science engine is
