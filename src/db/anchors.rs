@@ -195,6 +195,36 @@ pub async fn cohort_count(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<i64
     .await
 }
 
+/// Records the anchors a cohort forces into every shape (inside its creating transaction).
+pub async fn set_cohort_anchors(
+    conn: &mut SqliteConnection,
+    cohort_id: i64,
+    anchor_ids: &[i64],
+) -> sqlx::Result<()> {
+    let json = serde_json::to_string(anchor_ids).expect("integers serialise");
+    sqlx::query("update cohort set anchors = ? where cohort_id = ?")
+        .bind(json)
+        .bind(cohort_id)
+        .execute(conn)
+        .await?;
+    Ok(())
+}
+
+/// Records the anchors a stored shape mixed (inside the shape's transaction).
+pub async fn set_shape_anchors(
+    conn: &mut SqliteConnection,
+    shape_id: i64,
+    anchor_ids: &[i64],
+) -> sqlx::Result<()> {
+    let json = serde_json::to_string(anchor_ids).expect("integers serialise");
+    sqlx::query("update shape set anchor_ids = ? where shape_id = ?")
+        .bind(json)
+        .bind(shape_id)
+        .execute(conn)
+        .await?;
+    Ok(())
+}
+
 /// Removes an anchor; false when it did not exist.
 pub async fn delete(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<bool> {
     let done = sqlx::query("delete from anchor where anchor_id = ?")

@@ -363,6 +363,35 @@ async fn delete_anchor(
     Ok(StatusCode::NO_CONTENT)
 }
 
+/// Checks a cohort request's `anchors` against the database: each must exist, belong to
+/// `model_id` and be ready. Returns the ids.
+pub(super) async fn check_cohort_anchors(
+    state: &AppState,
+    model_id: &str,
+    ids: &[i64],
+) -> Result<Vec<i64>> {
+    for (i, &id) in ids.iter().enumerate() {
+        let field = format!("anchors[{i}]");
+        let row = db::anchors::get(&state.pool, id).await?;
+        let Some(row) = row else {
+            let msg = format!("anchor {id} does not exist");
+            return Err(ApiError::invalid(field, "exists", msg));
+        };
+        if row.model_id != model_id {
+            let msg = format!(
+                "anchor {id} belongs to model {:?}, not {model_id:?}",
+                row.model_id
+            );
+            return Err(ApiError::invalid(field, "same-model", msg));
+        }
+        if row.status != "ready" || row.latent.is_none() {
+            let msg = format!("anchor {id} is {}, not ready", row.status);
+            return Err(ApiError::invalid(field, "ready", msg));
+        }
+    }
+    Ok(ids.to_vec())
+}
+
 async fn load(state: &AppState, id: &str) -> Result<AnchorRow> {
     let anchor_id = parse_id("anchor", id)?;
     db::anchors::get(&state.pool, anchor_id)

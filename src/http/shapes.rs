@@ -85,6 +85,9 @@ pub struct Provenance {
     pub selection: String,
     /// Which draw was kept (0 = the first); `seed` is that draw's seed.
     pub attempt: i64,
+    /// Fitted anchors mixed as well (see `POST /v1/models/{id}/fit`); their weights follow
+    /// the training shapes' in `weights`.
+    pub anchor_ids: Vec<i64>,
 }
 
 /// A unit-ball transform.
@@ -115,6 +118,10 @@ impl ShapeView {
                 latent_noise: s.latent_noise,
                 selection: s.selection,
                 attempt: s.attempt,
+                anchor_ids: match &s.anchor_ids {
+                    Some(json) => parse_json(json)?,
+                    None => Vec::new(),
+                },
             },
             vertex_count: s.vertex_count,
             triangle_count: s.triangle_count,

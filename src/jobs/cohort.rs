@@ -10,8 +10,8 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::engine::{GeneratedShape, ModelInfo, ShapeSpec};
-use super::plan::{CohortPlan, Weighting};
+use super::engine::{AnchorLatent, GeneratedShape, ModelInfo, ShapeSpec};
+use super::plan::{CohortPlan, Weighting, force_anchors};
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
 use crate::anatomy::shape::measure_shape;
 use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
@@ -84,6 +84,15 @@ pub(super) async fn run(
         None
     };
     let plan = plan_for(&cohort, &info, latents)?;
+    let anchor_ids: Vec<i64> = match &cohort.anchors {
+        Some(json) => serde_json::from_str(json).context("stored anchors are not JSON")?,
+        None => Vec::new(),
+    };
+    let anchors = match anchor_latents(&ctx.pool, &anchor_ids).await {
+        Ok(a) => a,
+        Err(e) if db::storage_fault_in(&e).is_some() => return Err(e),
+        Err(e) => return Ok(RunOutcome::Failed(format!("anchors: {e:#}"))),
+    };
 
     let stored: HashSet<i64> = db::shapes::existing_indices(&ctx.pool, cohort.cohort_id)
         .await?
@@ -118,7 +127,7 @@ pub(super) async fn run(
             if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
                 return Ok(stop);
             }
-            let spec = plan.shape_spec_attempt(index as u64, attempt);
+            let spec = force_anchors(plan.shape_spec_attempt(index as u64, attempt), &anchors);
             let generated = generate(
                 ctx,
                 model_dir.clone(),
@@ -178,6 +187,25 @@ pub(super) async fn run(
         return Ok(RunOutcome::Failed(format!("pairwise metrics: {e:#}")));
     }
     Ok(RunOutcome::Succeeded)
+}
+
+/// The latents of a cohort's anchors, in the listed order; an error names a missing one.
+async fn anchor_latents(pool: &sqlx::SqlitePool, ids: &[i64]) -> anyhow::Result<Vec<AnchorLatent>> {
+    let mut out = Vec::with_capacity(ids.len());
+    for &id in ids {
+        let row = db::anchors::get(pool, id)
+            .await?
+            .ok_or_else(|| anyhow::anyhow!("anchor {id} no longer exists"))?;
+        let (Some(latent), Some(transform)) = (row.latent_values(), row.transform()) else {
+            anyhow::bail!("anchor {id} has no fitted latent");
+        };
+        out.push(AnchorLatent {
+            anchor_id: id,
+            latent,
+            transform,
+        });
+    }
+    Ok(out)
 }
 
 /// One draw of a shape with its distance to the training set.
@@ -316,9 +344,13 @@ async fn commit_shape(
         anatomy_error: finished.anatomy.as_ref().err().map(String::as_str),
     };
     let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
-    db::shapes::insert(&mut tx, &row)
+    let shape_id = db::shapes::insert(&mut tx, &row)
         .await
         .with_context(|| format!("cannot store shape {index}"))?;
+    if !spec.anchors.is_empty() {
+        let ids: Vec<i64> = spec.anchors.iter().map(|a| a.anchor_id).collect();
+        db::anchors::set_shape_anchors(&mut tx, shape_id, &ids).await?;
+    }
     db::jobs::set_progress(&mut tx, job_id, done).await?;
     tx.commit().await.context("cannot commit shape")?;
     Ok(())

@@ -42,7 +42,7 @@ pub struct TrainingShapeInfo {
     pub reconstruction_cd: Option<f64>,
 }
 
-/// What to generate: a convex combination of training latents.
+/// What to generate: a convex combination of training latents (and fitted anchors).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShapeSpec {
     /// Training shapes mixed (distinct, length = arity).
@@ -57,6 +57,20 @@ pub struct ShapeSpec {
     /// dimension, drawn from `seed` (0 = the plain convex combination).
     #[serde(default)]
     pub latent_noise: f64,
+    /// Fitted latents mixed as well; their weights follow the training shapes' in `weights`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub anchors: Vec<AnchorLatent>,
+}
+
+/// A fitted latent (an anchor) taking part in a mixture.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AnchorLatent {
+    /// The anchor's id.
+    pub anchor_id: i64,
+    /// Its latent code.
+    pub latent: Vec<f32>,
+    /// Its mesh's unit-ball transform (blended like the training shapes').
+    pub transform: UnitBallTransform,
 }
 
 /// One generated shape.

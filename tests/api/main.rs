@@ -6,6 +6,7 @@ mod cohorts;
 mod conformance;
 mod engine;
 mod errors;
+mod fit;
 mod helpers;
 mod jobs;
 mod limits;

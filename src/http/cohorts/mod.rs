@@ -62,6 +62,10 @@ async fn create_cohort(
     let info: ModelInfo = serde_json::from_str(&model.manifest)
         .map_err(|e| anyhow::anyhow!("model {} has a bad manifest: {e}", model.model_id))?;
     req.check_against(&info)?;
+    let anchors = match &req.anchors {
+        Some(ids) => crate::http::anchors::check_cohort_anchors(&state, &req.model_id, ids).await?,
+        None => Vec::new(),
+    };
     let fingerprint = req.fingerprint();
 
     let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
@@ -105,6 +109,9 @@ async fn create_cohort(
         },
     )
     .await?;
+    if !anchors.is_empty() {
+        db::anchors::set_cohort_anchors(&mut tx, cohort_id, &anchors).await?;
+    }
     let payload = serde_json::to_value(CohortPayload { cohort_id }).map_err(anyhow::Error::from)?;
     db::jobs::set_payload(&mut tx, job_id, &payload).await?;
     tx.commit().await?;
