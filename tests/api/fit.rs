@@ -489,3 +489,74 @@ async fn cohort_anchors_must_be_ready_distinct_and_of_the_same_model() {
         );
     }
 }
+
+/// A database made by the previous schema, with a finished cohort job, is upgraded in place:
+/// rows and their links survive the job table's rebuild, foreign keys are enforced again
+/// and the new job kind is accepted.
+#[tokio::test]
+async fn the_fit_migration_upgrades_a_populated_database() {
+    use std::str::FromStr;
+    let dir = tempfile::tempdir().unwrap();
+    let older = dir.path().join("older-migrations");
+    std::fs::create_dir(&older).unwrap();
+    let all = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("migrations");
+    for entry in std::fs::read_dir(&all).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if name.as_str() < "20261129000400" {
+            std::fs::copy(&path, older.join(&name)).unwrap();
+        }
+    }
+    let url = format!("sqlite://{}", dir.path().join("old.db").display());
+    let options = sqlx::sqlite::SqliteConnectOptions::from_str(&url)
+        .unwrap()
+        .create_if_missing(true)
+        .foreign_keys(true);
+    let pool = sqlx::SqlitePool::connect_with(options).await.unwrap();
+    let migrator = sqlx::migrate::Migrator::new(older.as_path()).await.unwrap();
+    migrator.run(&pool).await.unwrap();
+    for sql in [
+        "insert into model (model_id, dir_path, manifest) values ('m', 'd', '{}')",
+        "insert into job (kind, payload, status, progress_done, progress_total, claim_progress,
+             stalled_attempts) values ('cohort', '{\"cohort_id\": 1}', 'succeeded', 3, 3, 2, 1)",
+        "insert into cohort (model_id, job_id, count, arity, weighting, seed, resolution,
+             request_hash) values ('m', 1, 3, 2, 'equal', 1, 64, 'h')",
+    ] {
+        sqlx::query(sql).execute(&pool).await.unwrap();
+    }
+    pool.close().await;
+
+    let pool = aortagen::db::connect(&url, 2).await.unwrap();
+    let job: (String, String, i64, i64, i64) = sqlx::query_as(
+        "select kind, status, progress_done, claim_progress, stalled_attempts from job
+         where job_id = 1",
+    )
+    .fetch_one(&pool)
+    .await
+    .unwrap();
+    assert_eq!(job, ("cohort".into(), "succeeded".into(), 3, 2, 1));
+    let cohort_job: i64 = sqlx::query_scalar("select job_id from cohort where cohort_id = 1")
+        .fetch_one(&pool)
+        .await
+        .unwrap();
+    assert_eq!(cohort_job, 1);
+    let orphan = sqlx::query("delete from job where job_id = 1")
+        .execute(&pool)
+        .await;
+    assert!(orphan.is_err(), "the cohort's foreign key still holds");
+    sqlx::query("insert into job (kind, payload) values ('fit', '{}')")
+        .execute(&pool)
+        .await
+        .unwrap();
+    let bogus = sqlx::query("insert into job (kind, payload) values ('bogus', '{}')")
+        .execute(&pool)
+        .await;
+    assert!(bogus.is_err(), "the kind check still holds");
+    let index: i64 = sqlx::query_scalar(
+        "select count(*) from sqlite_master where type = 'index' and name = 'job_status_idx'",
+    )
+    .fetch_one(&pool)
+    .await
+    .unwrap();
+    assert_eq!(index, 1);
+}
