@@ -2,12 +2,15 @@
 -- Fitting new shapes: a job kind 'fit', the fitted latents ("anchors") and their use in
 -- cohorts. SQLite cannot change a CHECK constraint in place, so the job table is rebuilt
 -- (with foreign keys off, as the SQLite manual's table-rebuild procedure requires: the
--- cohort table references job) inside one explicit transaction.
+-- cohort table references job) inside one explicit transaction. Every statement can run a
+-- second time on its own result (no ALTER TABLE … ADD COLUMN): the migration is recorded
+-- after the commit, so a process killed in between runs it again at the next start.
 
 pragma foreign_keys = off;
 
 begin;
 
+drop table if exists job_rebuilt;
 create table job_rebuilt (
     job_id           integer primary key,
     kind             text not null check (kind in ('cohort', 'training', 'fit')),
@@ -43,11 +46,11 @@ insert into job_rebuilt (job_id, kind, payload, status, attempts, progress_done,
 
 drop table job;
 alter table job_rebuilt rename to job;
-create index job_status_idx on job (status, job_id);
+create index if not exists job_status_idx on job (status, job_id);
 
 -- A latent fitted to an uploaded mesh for a model whose network stays frozen. The row is
 -- created with the request ('fitting') and completed by its job ('ready' or 'failed').
-create table anchor (
+create table if not exists anchor (
     anchor_id     integer primary key,
     model_id      text not null references model (model_id) on delete cascade,
     job_id        integer not null unique references job (job_id),
@@ -73,12 +76,25 @@ create table anchor (
     updated_at    text not null default (strftime('%Y-%m-%dT%H:%M:%fZ', 'now')),
     unique (model_id, name)
 );
-create index anchor_model_idx on anchor (model_id, anchor_id);
+create index if not exists anchor_model_idx on anchor (model_id, anchor_id);
 
--- Anchors forced into every shape of a cohort (JSON array of anchor ids), or null.
-alter table cohort add column anchors text;
--- The anchors a shape mixed (JSON array of anchor ids, weights after the training ones).
-alter table shape add column anchor_ids text;
+-- Anchors forced into every shape of a cohort, in request order. An anchor a cohort uses
+-- cannot be deleted (no cascade on anchor_id).
+create table if not exists cohort_anchor (
+    cohort_id integer not null references cohort (cohort_id) on delete cascade,
+    position  integer not null,
+    anchor_id integer not null references anchor (anchor_id),
+    primary key (cohort_id, position)
+);
+create index if not exists cohort_anchor_anchor_idx on cohort_anchor (anchor_id);
+
+-- The anchors a shape mixed, in mixture order (their weights follow the training ones).
+create table if not exists shape_anchor (
+    shape_id  integer not null references shape (shape_id) on delete cascade,
+    position  integer not null,
+    anchor_id integer not null,
+    primary key (shape_id, position)
+);
 
 commit;
 

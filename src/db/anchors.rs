@@ -185,14 +185,10 @@ pub async fn list_for_model(pool: &SqlitePool, model_id: &str) -> sqlx::Result<V
 
 /// Cohorts whose request names the anchor.
 pub async fn cohort_count(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<i64> {
-    sqlx::query_scalar(
-        "select count(*) from cohort
-         where anchors is not null
-           and exists (select 1 from json_each(cohort.anchors) where value = ?)",
-    )
-    .bind(anchor_id)
-    .fetch_one(pool)
-    .await
+    sqlx::query_scalar("select count(distinct cohort_id) from cohort_anchor where anchor_id = ?")
+        .bind(anchor_id)
+        .fetch_one(pool)
+        .await
 }
 
 /// Records the anchors a cohort forces into every shape (inside its creating transaction).
@@ -201,12 +197,14 @@ pub async fn set_cohort_anchors(
     cohort_id: i64,
     anchor_ids: &[i64],
 ) -> sqlx::Result<()> {
-    let json = serde_json::to_string(anchor_ids).expect("integers serialise");
-    sqlx::query("update cohort set anchors = ? where cohort_id = ?")
-        .bind(json)
-        .bind(cohort_id)
-        .execute(conn)
-        .await?;
+    for (position, &anchor_id) in anchor_ids.iter().enumerate() {
+        sqlx::query("insert into cohort_anchor (cohort_id, position, anchor_id) values (?, ?, ?)")
+            .bind(cohort_id)
+            .bind(position as i64)
+            .bind(anchor_id)
+            .execute(&mut *conn)
+            .await?;
+    }
     Ok(())
 }
 
@@ -216,12 +214,14 @@ pub async fn set_shape_anchors(
     shape_id: i64,
     anchor_ids: &[i64],
 ) -> sqlx::Result<()> {
-    let json = serde_json::to_string(anchor_ids).expect("integers serialise");
-    sqlx::query("update shape set anchor_ids = ? where shape_id = ?")
-        .bind(json)
-        .bind(shape_id)
-        .execute(conn)
-        .await?;
+    for (position, &anchor_id) in anchor_ids.iter().enumerate() {
+        sqlx::query("insert into shape_anchor (shape_id, position, anchor_id) values (?, ?, ?)")
+            .bind(shape_id)
+            .bind(position as i64)
+            .bind(anchor_id)
+            .execute(&mut *conn)
+            .await?;
+    }
     Ok(())
 }
 

@@ -527,6 +527,10 @@ async fn the_fit_migration_upgrades_a_populated_database() {
     pool.close().await;
 
     let pool = aortagen::db::connect(&url, 2).await.unwrap();
+    // The migration is recorded after its commit: a second run (a process killed in between)
+    // must succeed on its own result.
+    let again = include_str!("../../migrations/20261129000400_fit_anchors.sql");
+    sqlx::raw_sql(again).execute(&pool).await.unwrap();
     let job: (String, String, i64, i64, i64) = sqlx::query_as(
         "select kind, status, progress_done, claim_progress, stalled_attempts from job
          where job_id = 1",
