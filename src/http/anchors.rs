@@ -348,7 +348,7 @@ async fn delete_anchor(
         .is_some_and(|j| matches!(j.status.as_str(), "queued" | "running"))
     {
         return Err(ApiError::Conflict(format!(
-            "anchor {id} is still fitting (job {}); cancel or wait for it first",
+            "anchor {id} is still fitting (job {}); wait for the job to end",
             row.job_id
         )));
     }
