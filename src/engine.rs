@@ -14,12 +14,14 @@ use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
 use crate::geometry::sampling::sample_surface;
 use crate::jobs::engine::{
-    CohortEngine, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo, TrainingSpec,
+    CohortEngine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
+    TrainingSpec,
 };
 use crate::sdf::backend::Backend;
 use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
 use crate::sdf::evaluation::EvaluationReport;
+use crate::sdf::fit::{FitSettings, fit_mesh};
 use crate::sdf::generate::{Mixture, noisy_latent};
 use crate::sdf::manifest::MANIFEST_FILE;
 use crate::sdf::novelty::{NoveltyReference, training_surfaces};
@@ -135,12 +137,8 @@ impl CohortEngine for SdfEngine {
         if let Some(&bad) = spec.training_indices.iter().find(|&&i| i >= shapes) {
             bail!("training index {bad} is out of range: the model has {shapes} shapes");
         }
-        let mixture = Mixture {
-            indices: spec.training_indices.clone(),
-            weights: spec.weights.clone(),
-        };
-        let transform = mixture.mix_transforms(&cached.model.manifest.transforms())?;
-        let latent = noisy_latent(&mixture, &cached.latents, spec.latent_noise, spec.seed);
+        let (transform, latent) =
+            mixed_latent(spec, &cached.latents, &cached.model.manifest.transforms())?;
         let field = cached.model.field(&latent)?;
         let extraction = reconstruct(&field, spec.resolution, self.extraction)?;
         let mesh_unit = extraction.mesh;
@@ -250,6 +248,88 @@ impl CohortEngine for SdfEngine {
         }
         self.model_info(&spec.model_dir)
     }
+
+    fn fit_anchor(
+        &self,
+        model_dir: &Path,
+        spec: &FitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        let mesh = crate::formats::read_mesh_file(&spec.mesh_path)
+            .with_context(|| format!("cannot read {}", spec.mesh_path.display()))?;
+        mesh.validate().context("unusable mesh")?;
+        // A copy, so cohorts on the same model are not held up for the whole fit.
+        let model = {
+            let cached = self.model(model_dir)?;
+            let cached = cached
+                .lock()
+                .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+            LoadedModel {
+                dir: cached.model.dir.clone(),
+                manifest: cached.model.manifest.clone(),
+                decoder: cached.model.decoder.clone(),
+            }
+        };
+        let mut settings = FitSettings::new(spec.seed);
+        settings.iterations = spec.iterations;
+        settings.evaluation.chamfer_points = self.chamfer_points;
+        settings.evaluation.extraction = self.extraction;
+        let fitted = fit_mesh(
+            &model,
+            &mesh,
+            &settings,
+            &mut |p| progress.store(p.iteration as u64, Ordering::SeqCst),
+            Some(cancel),
+        )?;
+        Ok(FittedAnchor {
+            latent: fitted.latent,
+            transform: fitted.transform,
+            chamfer: fitted.chamfer,
+        })
+    }
+}
+
+/// The spec's mixed latent and transform: training latents first, then the anchors (their
+/// weights follow in `spec.weights`); the noise scale comes from the training latents.
+fn mixed_latent(
+    spec: &ShapeSpec,
+    latents: &[Vec<f32>],
+    transforms: &[crate::geometry::normalize::UnitBallTransform],
+) -> anyhow::Result<(crate::geometry::normalize::UnitBallTransform, Vec<f32>)> {
+    let k = spec.training_indices.len();
+    anyhow::ensure!(
+        spec.weights.len() == k + spec.anchors.len(),
+        "{} weights for {k} training shapes and {} anchors",
+        spec.weights.len(),
+        spec.anchors.len()
+    );
+    let mixture = Mixture {
+        indices: spec.training_indices.clone(),
+        weights: spec.weights[..k].to_vec(),
+    };
+    let mut latent = noisy_latent(&mixture, latents, spec.latent_noise, spec.seed);
+    let mut parts: Vec<(f64, &crate::geometry::normalize::UnitBallTransform)> = mixture
+        .indices
+        .iter()
+        .zip(&mixture.weights)
+        .map(|(&i, &w)| (w, &transforms[i]))
+        .collect();
+    for (anchor, &w) in spec.anchors.iter().zip(&spec.weights[k..]) {
+        anyhow::ensure!(
+            anchor.latent.len() == latent.len(),
+            "anchor {} has {} latent values, the model {}",
+            anchor.anchor_id,
+            anchor.latent.len(),
+            latent.len()
+        );
+        for (acc, &v) in latent.iter_mut().zip(&anchor.latent) {
+            *acc = (f64::from(*acc) + w * f64::from(v)) as f32;
+        }
+        parts.push((w, &anchor.transform));
+    }
+    let transform = crate::geometry::normalize::UnitBallTransform::blend(&parts)?;
+    Ok((transform, latent))
 }
 
 /// Publishes the epochs saved in a checkpoint to the job that runs the training.

@@ -72,6 +72,7 @@ fn the_engine_finds_a_training_shape_as_its_own_nearest_neighbour() {
         seed: 11,
         resolution: 48,
         latent_noise: 0.0,
+        anchors: Vec::new(),
     };
     let copy = engine.generate_shape(&dir, &spec, &cancel).unwrap();
     let own = reference.novelty(&copy.mesh_unit, 11).unwrap();

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 pub mod compare;
 pub mod evaluate;
+pub mod fit;
 pub mod generate;
 pub mod measure;
 pub mod mesh;
@@ -34,6 +35,8 @@ pub enum Command {
     Train(train::TrainArgs),
     /// Reconstruct every training shape and report its Chamfer distance.
     Evaluate(evaluate::EvaluateArgs),
+    /// Fit a latent to a new mesh (network frozen) and keep it as an anchor of the model.
+    Fit(fit::FitArgs),
     /// Generate shapes as convex combinations of learned latents.
     Generate(generate::GenerateArgs),
     /// Report a mesh file's counts, area, volume, closedness and extent; convert formats.
@@ -56,6 +59,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Render(args) => render::run(args),
         Command::Train(args) => train::run(args),
         Command::Evaluate(args) => evaluate::run(args),
+        Command::Fit(args) => fit::run(args),
         Command::Generate(args) => generate::run(args),
         Command::Mesh(args) => mesh::run(args),
         Command::Serve(args) => serve::run(args),

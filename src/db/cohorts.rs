@@ -88,6 +88,8 @@ pub struct CohortRow {
     pub started_at: Option<String>,
     /// When work ended.
     pub finished_at: Option<String>,
+    /// Anchor ids forced into every shape (JSON array from `cohort_anchor`), if any.
+    pub anchors: Option<String>,
 }
 
 const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity, c.weighting,
@@ -101,7 +103,10 @@ const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity
             as targets_not_met,
         c.request_hash, j.status,
         (select count(*) from shape s where s.cohort_id = c.cohort_id) as shapes_done,
-        j.error, c.created_at, j.started_at, j.finished_at
+        j.error, c.created_at, j.started_at, j.finished_at,
+        (select json_group_array(anchor_id) from (select anchor_id from cohort_anchor a
+            where a.cohort_id = c.cohort_id order by a.position) having count(*) > 0)
+            as anchors
     from cohort c join job j on j.job_id = c.job_id";
 
 /// Inserts a cohort inside the caller's transaction and returns its id.

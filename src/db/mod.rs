@@ -2,6 +2,7 @@
 //! Only this module writes SQL; every query is a short function taking a pool or a
 //! connection and returning a typed row.
 
+pub mod anchors;
 pub mod cohort_metrics;
 pub mod cohorts;
 pub mod jobs;

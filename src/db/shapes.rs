@@ -122,6 +122,8 @@ pub struct ShapeRow {
     pub targets_met: Option<bool>,
     /// Commit time.
     pub created_at: String,
+    /// Anchors mixed (JSON array of ids from `shape_anchor`), if any.
+    pub anchor_ids: Option<String>,
 }
 
 /// A shape's stored mesh and the transform to mm.
@@ -148,7 +150,10 @@ const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
         s.vertex_count, s.triangle_count, s.area_mm2, s.volume_mm3,
         s.centre_x, s.centre_y, s.centre_z, s.radius, s.mesh_sha256, s.latent_noise,
         s.selection, s.attempt, s.redraws, s.novelty_cd, s.nearest_training_index,
-        s.novelty_met, s.anatomy, s.anatomy_error, s.candidates, s.targets_met, s.created_at
+        s.novelty_met, s.anatomy, s.anatomy_error, s.candidates, s.targets_met, s.created_at,
+        (select json_group_array(anchor_id) from (select anchor_id from shape_anchor a
+            where a.shape_id = s.shape_id order by a.position) having count(*) > 0)
+            as anchor_ids
     from shape s join cohort c on c.cohort_id = s.cohort_id";
 
 /// Inserts a shape inside the caller's transaction.

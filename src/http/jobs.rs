@@ -15,7 +15,7 @@ use crate::db::{self, jobs::JobRow};
 pub struct JobView {
     /// Job id.
     pub id: i64,
-    /// `cohort` or `training`.
+    /// `cohort`, `training` or `fit`.
     pub kind: String,
     /// queued | running | succeeded | failed | cancelled.
     pub status: String,
@@ -50,6 +50,9 @@ impl From<JobRow> for JobView {
     fn from(j: JobRow) -> Self {
         let payload: serde_json::Value = serde_json::from_str(&j.payload).unwrap_or_default();
         let subject = match (payload.get("cohort_id"), payload.get("model_id")) {
+            _ if payload.get("anchor_id").is_some() => {
+                payload.get("anchor_id").map(|a| format!("/v1/anchors/{a}"))
+            }
             (Some(c), _) => Some(format!("/v1/cohorts/{c}")),
             (None, Some(serde_json::Value::String(m))) => Some(format!("/v1/models/{m}")),
             _ => None,

@@ -2,6 +2,7 @@
 //! tracing and latency metrics. Only this module knows HTTP.
 
 pub mod access;
+pub mod anchors;
 pub mod cohorts;
 pub mod error;
 pub mod extract;
@@ -64,6 +65,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(openapi::router())
         .merge(metrics::router())
         .merge(models::router())
+        .merge(anchors::router())
         .merge(cohorts::router())
         .merge(shapes::router())
         .merge(jobs::router())

@@ -16,6 +16,7 @@ use super::extract::ApiQuery;
 use super::upload_archive::{ArchiveLimits, looks_like_zip, unpack};
 use crate::db;
 use crate::formats::{MeshFormat, read_mesh_bytes};
+use crate::geometry::TriMesh;
 use crate::jobs::engine::TrainingSpec;
 use crate::jobs::training::TrainingPayload;
 use crate::sdf::config::Preset;
@@ -207,7 +208,7 @@ pub struct UploadQuery {
     pub epochs: Option<u64>,
 }
 
-fn is_zip_body(headers: &axum::http::HeaderMap) -> bool {
+pub(super) fn is_zip_body(headers: &axum::http::HeaderMap) -> bool {
     headers
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
@@ -219,7 +220,7 @@ fn is_zip_body(headers: &axum::http::HeaderMap) -> bool {
         })
 }
 
-fn body_error(status: StatusCode, text: String, limit: usize) -> ApiError {
+pub(super) fn body_error(status: StatusCode, text: String, limit: usize) -> ApiError {
     if status == StatusCode::PAYLOAD_TOO_LARGE {
         ApiError::PayloadTooLarge { limit }
     } else {
@@ -230,7 +231,7 @@ fn body_error(status: StatusCode, text: String, limit: usize) -> ApiError {
     }
 }
 
-fn parse_number(field: &'static str, bytes: &[u8]) -> Result<u64> {
+pub(super) fn parse_number(field: &'static str, bytes: &[u8]) -> Result<u64> {
     String::from_utf8_lossy(bytes)
         .trim()
         .parse()
@@ -238,7 +239,7 @@ fn parse_number(field: &'static str, bytes: &[u8]) -> Result<u64> {
 }
 
 /// Unpacks an archive off the executor (decompression is CPU work).
-async fn unpack_blocking(
+pub(super) async fn unpack_blocking(
     name: String,
     bytes: Bytes,
     limits: ArchiveLimits,
@@ -267,21 +268,31 @@ fn check_model_id(id: &str) -> Result<()> {
 /// Parses and validates every file; the first failure names its file.
 fn validate_meshes(files: &[(String, Vec<u8>)]) -> Result<()> {
     for (name, bytes) in files {
-        let field = format!("files[{name}]");
-        let format: MeshFormat = std::path::Path::new(name)
-            .extension()
-            .and_then(|e| e.to_str())
-            .and_then(|e| e.parse().ok())
-            .or_else(|| MeshFormat::sniff(bytes))
-            .ok_or_else(|| {
-                ApiError::invalid(&field, "format", format!("{name}: unknown mesh format"))
-            })?;
-        let mesh = read_mesh_bytes(bytes, format, name)
-            .map_err(|e| ApiError::invalid(&field, "mesh", e.to_string()))?;
-        mesh.validate()
-            .map_err(|e| ApiError::invalid(&field, "mesh", format!("{name}: {e}")))?;
+        validate_mesh(&format!("files[{name}]"), name, bytes)?;
     }
     Ok(())
+}
+
+/// Parses and validates one uploaded mesh (format from the extension, else sniffed); a
+/// failure is a 422 on `field` naming the reason.
+pub(super) fn validate_mesh(field: &str, name: &str, bytes: &[u8]) -> Result<TriMesh> {
+    let format = mesh_format(name, bytes).ok_or_else(|| {
+        ApiError::invalid(field, "format", format!("{name}: unknown mesh format"))
+    })?;
+    let mesh = read_mesh_bytes(bytes, format, name)
+        .map_err(|e| ApiError::invalid(field, "mesh", e.to_string()))?;
+    mesh.validate()
+        .map_err(|e| ApiError::invalid(field, "mesh", format!("{name}: {e}")))?;
+    Ok(mesh)
+}
+
+/// The mesh format a file name's extension names, else the one its bytes announce.
+pub(super) fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
+    std::path::Path::new(name)
+        .extension()
+        .and_then(|e| e.to_str())
+        .and_then(|e| e.parse().ok())
+        .or_else(|| MeshFormat::sniff(bytes))
 }
 
 async fn write_inputs(dir: &std::path::Path, files: &[(String, Vec<u8>)]) -> anyhow::Result<()> {

@@ -26,6 +26,7 @@ use super::AppState;
         (name = "cohorts", description = "Request and follow synthetic cohorts"),
         (name = "shapes", description = "Generated shapes and their meshes"),
         (name = "models", description = "Registered generative models"),
+        (name = "anchors", description = "New shapes fitted to a trained model (latent optimisation with the network frozen)"),
         (name = "jobs", description = "Background work"),
         (name = "reports", description = "Plots (SVG) and self-contained HTML reports of models and cohorts"),
         (name = "operations", description = "Health, metrics and documentation"),

@@ -90,6 +90,9 @@ pub struct Provenance {
     /// Whether the shape meets every target of its cohort (null without targets); false
     /// when no candidate did and the closest was kept.
     pub targets_met: Option<bool>,
+    /// Fitted anchors mixed as well (see `POST /v1/models/{id}/fit`); their weights follow
+    /// the training shapes' in `weights`.
+    pub anchor_ids: Vec<i64>,
 }
 
 /// A unit-ball transform.
@@ -122,6 +125,10 @@ impl ShapeView {
                 attempt: s.attempt,
                 candidates: s.candidates,
                 targets_met: s.targets_met,
+                anchor_ids: match &s.anchor_ids {
+                    Some(json) => parse_json(json)?,
+                    None => Vec::new(),
+                },
             },
             vertex_count: s.vertex_count,
             triangle_count: s.triangle_count,

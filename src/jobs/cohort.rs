@@ -11,8 +11,8 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::conditioned::{ShapeSearch, Targeting, search_shape, training_anatomy};
-use super::engine::{CohortEngine, GeneratedShape, ModelInfo, ShapeSpec};
-use super::plan::{CohortPlan, Weighting};
+use super::engine::{AnchorLatent, CohortEngine, GeneratedShape, ModelInfo, ShapeSpec};
+use super::plan::{CohortPlan, Weighting, force_anchors};
 use super::priority::spawn_background;
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
 use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
@@ -86,6 +86,15 @@ pub(super) async fn run(
         None
     };
     let plan = plan_for(&cohort, &info, latents)?;
+    let anchor_ids: Vec<i64> = match &cohort.anchors {
+        Some(json) => serde_json::from_str(json).context("stored anchors are not JSON")?,
+        None => Vec::new(),
+    };
+    let anchors = match anchor_latents(&ctx.pool, &anchor_ids).await {
+        Ok(a) => a,
+        Err(e) if db::storage_fault_in(&e).is_some() => return Err(e),
+        Err(e) => return Ok(RunOutcome::Failed(format!("anchors: {e:#}"))),
+    };
 
     let stored: HashSet<i64> = db::shapes::existing_indices(&ctx.pool, cohort.cohort_id)
         .await?
@@ -138,6 +147,7 @@ pub(super) async fn run(
                 reference,
                 min_novelty: cohort.min_novelty,
                 cancel: flag.clone(),
+                anchors: anchors.clone(),
             };
             let searched = match search_shape(search, index as u64).await {
                 Ok(s) => s,
@@ -179,7 +189,7 @@ pub(super) async fn run(
             if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
                 return Ok(stop);
             }
-            let spec = plan.shape_spec_attempt(index as u64, attempt);
+            let spec = force_anchors(plan.shape_spec_attempt(index as u64, attempt), &anchors);
             let generated = generate(
                 ctx,
                 model_dir.clone(),
@@ -272,6 +282,25 @@ async fn targeting(
         &training,
         cohort.arity as usize,
     ))
+}
+
+/// The latents of a cohort's anchors, in the listed order; an error names a missing one.
+async fn anchor_latents(pool: &sqlx::SqlitePool, ids: &[i64]) -> anyhow::Result<Vec<AnchorLatent>> {
+    let mut out = Vec::with_capacity(ids.len());
+    for &id in ids {
+        let row = db::anchors::get(pool, id)
+            .await?
+            .ok_or_else(|| anyhow::anyhow!("anchor {id} no longer exists"))?;
+        let (Some(latent), Some(transform)) = (row.latent_values(), row.transform()) else {
+            anyhow::bail!("anchor {id} has no fitted latent");
+        };
+        out.push(AnchorLatent {
+            anchor_id: id,
+            latent,
+            transform,
+        });
+    }
+    Ok(out)
 }
 
 /// One draw of a shape with its distance to the training set.
@@ -432,9 +461,13 @@ async fn commit_shape(
         targets_met: outcome.targets_met,
     };
     let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
-    db::shapes::insert(&mut tx, &row)
+    let shape_id = db::shapes::insert(&mut tx, &row)
         .await
         .with_context(|| format!("cannot store shape {index}"))?;
+    if !spec.anchors.is_empty() {
+        let ids: Vec<i64> = spec.anchors.iter().map(|a| a.anchor_id).collect();
+        db::anchors::set_shape_anchors(&mut tx, shape_id, &ids).await?;
+    }
     db::jobs::set_progress(&mut tx, job_id, done).await?;
     tx.commit().await.context("cannot commit shape")?;
     Ok(())

@@ -11,9 +11,9 @@ use serde::{Deserialize, Serialize};
 use sqlx::SqlitePool;
 
 use super::cohort::{Candidate, draw};
-use super::engine::{CohortEngine, GeneratedShape, ShapeSpec};
+use super::engine::{AnchorLatent, CohortEngine, GeneratedShape, ShapeSpec};
 use super::join_error;
-use super::plan::CohortPlan;
+use super::plan::{CohortPlan, force_anchors};
 use super::priority::spawn_background;
 use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
 use crate::anatomy::targets::{
@@ -49,6 +49,7 @@ pub fn measure_training_shapes(
                 seed: 0,
                 resolution: SCREEN_RESOLUTION,
                 latent_noise: 0.0,
+                anchors: Vec::new(),
             };
             let shape = engine
                 .generate_shape(model_dir, &spec, cancel)
@@ -150,6 +151,8 @@ pub(super) struct ShapeSearch {
     pub reference: Arc<NoveltyReference>,
     pub min_novelty: Option<f64>,
     pub cancel: Arc<AtomicBool>,
+    /// Fitted anchors forced into every candidate.
+    pub anchors: Vec<AnchorLatent>,
 }
 
 /// Searches shape `index`'s candidates off the executor.
@@ -174,14 +177,14 @@ fn search_blocking(s: &ShapeSearch, index: u64) -> anyhow::Result<SearchOutcome<
             ensure!(!s.cancel.load(Ordering::Relaxed), "cancelled");
             let spec = ShapeSpec {
                 resolution: screen_resolution,
-                ..t.spec(&s.plan, index, attempt)
+                ..force_anchors(t.spec(&s.plan, index, attempt), &s.anchors)
             };
             let shape = s.engine.generate_shape(&s.model_dir, &spec, &s.cancel)?;
             Ok(measure_mm(&shape))
         },
         |attempt| {
             ensure!(!s.cancel.load(Ordering::Relaxed), "cancelled");
-            let spec = t.spec(&s.plan, index, attempt);
+            let spec = force_anchors(t.spec(&s.plan, index, attempt), &s.anchors);
             let candidate = Candidate {
                 attempt,
                 ..draw(&*s.engine, &s.model_dir, spec, &s.reference, &s.cancel)?

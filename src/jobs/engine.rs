@@ -42,7 +42,7 @@ pub struct TrainingShapeInfo {
     pub reconstruction_cd: Option<f64>,
 }
 
-/// What to generate: a convex combination of training latents.
+/// What to generate: a convex combination of training latents (and fitted anchors).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShapeSpec {
     /// Training shapes mixed (distinct, length = arity).
@@ -57,6 +57,20 @@ pub struct ShapeSpec {
     /// dimension, drawn from `seed` (0 = the plain convex combination).
     #[serde(default)]
     pub latent_noise: f64,
+    /// Fitted latents mixed as well; their weights follow the training shapes' in `weights`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub anchors: Vec<AnchorLatent>,
+}
+
+/// A fitted latent (an anchor) taking part in a mixture.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AnchorLatent {
+    /// The anchor's id.
+    pub anchor_id: i64,
+    /// Its latent code.
+    pub latent: Vec<f32>,
+    /// Its mesh's unit-ball transform (blended like the training shapes').
+    pub transform: UnitBallTransform,
 }
 
 /// One generated shape.
@@ -85,6 +99,28 @@ pub struct TrainingSpec {
     /// Epochs to train (the engine's default when absent).
     #[serde(default)]
     pub epochs: Option<u64>,
+}
+
+/// A request to fit a latent to a new mesh for a trained model (network frozen).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FitSpec {
+    /// The uploaded mesh file (its extension or content tells the format).
+    pub mesh_path: std::path::PathBuf,
+    /// Adam steps on the latent.
+    pub iterations: usize,
+    /// Seed of the sampling and the batches.
+    pub seed: u64,
+}
+
+/// A fitted latent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FittedAnchor {
+    /// The latent code (the model's latent dimension).
+    pub latent: Vec<f32>,
+    /// Mesh units ↔ unit ball of the fitted mesh.
+    pub transform: UnitBallTransform,
+    /// Reconstruction Chamfer distance (unit-ball coordinates, as for training shapes).
+    pub chamfer: f64,
 }
 
 /// The science engine, as the job worker calls it. Every method is blocking CPU work and is
@@ -127,6 +163,20 @@ pub trait CohortEngine: Send + Sync + 'static {
         cancel: &AtomicBool,
         progress: &AtomicU64,
     ) -> anyhow::Result<ModelInfo>;
+
+    /// Fits a latent to the mesh in `spec.mesh_path` for the model in `model_dir`, its
+    /// network frozen. `progress` holds the steps done. Returns early with an error once
+    /// `cancel` becomes true. Engines without a trainable model refuse.
+    fn fit_anchor(
+        &self,
+        model_dir: &Path,
+        spec: &FitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        let _ = (model_dir, spec, cancel, progress);
+        anyhow::bail!("this engine cannot fit new shapes")
+    }
 }
 
 /// An engine that refuses every call: what the service runs on when no science engine is

@@ -1,10 +1,11 @@
 //! Background work: a durable queue in the `job` table, workers that claim and run jobs,
-//! and the job kinds (cohort generation, model training). Heavy work goes to
+//! and the job kinds (cohort generation, model training, fitting a new shape). Heavy work goes to
 //! `spawn_blocking`; a panic there fails the job, never the worker.
 
 pub mod cohort;
 pub mod conditioned;
 pub mod engine;
+pub mod fit;
 pub mod plan;
 pub mod priority;
 pub mod stats;
@@ -156,6 +157,7 @@ async fn execute(ctx: &JobContext, job: db::jobs::ClaimedJob) -> anyhow::Result<
     let result = match job.kind.as_str() {
         "cohort" => cohort::run(ctx, &job, &flag).await,
         "training" => training::run(ctx, &job, &flag).await,
+        "fit" => fit::run(ctx, &job, &flag).await,
         other => Err(anyhow!("unknown job kind {other:?}")),
     };
     ctx.controls.unregister(job.job_id);

@@ -8,7 +8,7 @@ use rand::{RngExt, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use super::engine::ShapeSpec;
+use super::engine::{AnchorLatent, ShapeSpec};
 use crate::sdf::generate::{Selection, attempt_seed, select_spread};
 
 /// Tolerance on the sum of explicit weights (DESIGN §4).
@@ -94,8 +94,22 @@ impl CohortPlan {
             seed,
             resolution: self.resolution,
             latent_noise: self.latent_noise,
+            anchors: Vec::new(),
         }
     }
+}
+
+/// Forces `anchors` into a drawn spec: they take the places of the last `anchors.len()`
+/// training picks (and their weights), so the mixture still has `arity` members and every
+/// other draw of the plan is unchanged.
+pub fn force_anchors(mut spec: ShapeSpec, anchors: &[AnchorLatent]) -> ShapeSpec {
+    if anchors.is_empty() {
+        return spec;
+    }
+    let keep = spec.training_indices.len().saturating_sub(anchors.len());
+    spec.training_indices.truncate(keep);
+    spec.anchors = anchors.to_vec();
+    spec
 }
 
 /// Checks explicit weights; the error names the violated rule.
@@ -244,6 +258,23 @@ mod tests {
             (first_weight_mean - 0.25).abs() < 0.02,
             "{first_weight_mean}"
         );
+    }
+
+    #[test]
+    fn forced_anchors_replace_the_last_training_picks_and_keep_the_weights() {
+        let p = plan(Weighting::Dirichlet);
+        let anchor = AnchorLatent {
+            anchor_id: 9,
+            latent: vec![0.5; 3],
+            transform: crate::geometry::normalize::UnitBallTransform::IDENTITY,
+        };
+        let drawn = p.shape_spec(4);
+        let forced = force_anchors(drawn.clone(), std::slice::from_ref(&anchor));
+        assert_eq!(forced.training_indices, drawn.training_indices[..3]);
+        assert_eq!(forced.weights, drawn.weights);
+        assert_eq!(forced.anchors, [anchor]);
+        assert_eq!(forced.seed, drawn.seed);
+        assert_eq!(force_anchors(drawn.clone(), &[]), drawn);
     }
 
     #[test]

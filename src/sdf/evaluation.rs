@@ -9,7 +9,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::reconstruct::{ExtractionMethod, reconstruct};
+use super::field::SdfField;
+use super::reconstruct::{ExtractionMethod, ReconstructError, reconstruct};
 use super::store::LoadedModel;
 use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{chamfer_distance, sampling_floor};
@@ -125,22 +126,16 @@ pub fn evaluate_model(
         let reconstructed = model
             .field(&latents[index])
             .map_err(Into::into)
-            .and_then(|f| {
-                reconstruct(&f, settings.resolution, settings.extraction).map(|e| e.mesh)
-            });
+            .and_then(|f| reconstruction_chamfer(&f, &unit, settings, seed));
         let result = match reconstructed {
-            Ok(mesh) => {
-                let a = sample_surface(&mesh, settings.chamfer_points, seed ^ 0x5eed);
-                let b = sample_surface(&unit, settings.chamfer_points, seed ^ 0xb0b);
-                ShapeFidelity {
-                    index,
-                    name: record.name.clone(),
-                    chamfer: Some(chamfer_distance(&a.points, &b.points)),
-                    sampling_floor: floor,
-                    triangles: mesh.triangles.len(),
-                    error: None,
-                }
-            }
+            Ok((chamfer, triangles)) => ShapeFidelity {
+                index,
+                name: record.name.clone(),
+                chamfer: Some(chamfer),
+                sampling_floor: floor,
+                triangles,
+                error: None,
+            },
             Err(e) => ShapeFidelity {
                 index,
                 name: record.name.clone(),
@@ -158,6 +153,22 @@ pub fn evaluate_model(
         *settings,
         results,
     ))
+}
+
+/// The reconstruction Chamfer distance of one shape as `aortagen evaluate` measures it: the
+/// zero level of `field` meshed with `settings`, both surfaces sampled with
+/// `settings.chamfer_points` points from `seed`, in unit-ball coordinates. Returns the
+/// distance and the reconstruction's triangle count.
+pub fn reconstruction_chamfer(
+    field: &SdfField,
+    original_unit: &TriMesh,
+    settings: &EvaluationSettings,
+    seed: u64,
+) -> Result<(f64, usize), ReconstructError> {
+    let mesh = reconstruct(field, settings.resolution, settings.extraction)?.mesh;
+    let a = sample_surface(&mesh, settings.chamfer_points, seed ^ 0x5eed);
+    let b = sample_surface(original_unit, settings.chamfer_points, seed ^ 0xb0b);
+    Ok((chamfer_distance(&a.points, &b.points), mesh.triangles.len()))
 }
 
 fn report(

@@ -26,12 +26,14 @@ pub use loss::{BatchError, IgrLossConfig, LossTerms, TrainingBatch, igr_loss};
 pub use network::{LatentOffsets, NetworkConfigError, SdfNetwork, SdfNetworkConfig, SdfOutput};
 pub use step::{SdfTrainer, TrainStepConfig, TrainStepOutput};
 
+pub mod anchors;
 pub mod batch;
 pub mod cache;
 pub mod conditioned;
 pub mod config;
 pub mod data;
 pub mod evaluation;
+pub mod fit;
 pub mod generate;
 pub mod manifest;
 pub mod novelty;

@@ -7,11 +7,14 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
+use anyhow::Context;
 use aortagen::geometry::TriMesh;
 use aortagen::geometry::chamfer::chamfer_distance;
 use aortagen::geometry::normalize::UnitBallTransform;
+use aortagen::geometry::normalize::normalize_to_unit_ball;
 use aortagen::jobs::engine::{
-    CohortEngine, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo, TrainingSpec,
+    CohortEngine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
+    TrainingSpec,
 };
 use aortagen::sdf::generate::{Mixture, noisy_latent};
 use aortagen::sdf::novelty::NoveltyReference;
@@ -95,8 +98,16 @@ impl CohortEngine for AnalyticEngine {
             }
         }
         anyhow::ensure!(!cancel.load(Ordering::SeqCst), "generation cancelled");
+        let k = spec.training_indices.len();
         let axes = if spec.latent_noise == 0.0 {
-            mixed_axes(&spec.training_indices, &spec.weights)
+            // Anchors' latents are semi-axes too; their weights follow the training ones.
+            let mut axes = mixed_axes(&spec.training_indices, &spec.weights[..k]);
+            for (anchor, w) in spec.anchors.iter().zip(&spec.weights[k..]) {
+                for (a, &z) in axes.iter_mut().zip(&anchor.latent) {
+                    *a += w * f64::from(z);
+                }
+            }
+            axes
         } else {
             let mixture = Mixture {
                 indices: spec.training_indices.clone(),
@@ -157,6 +168,29 @@ impl CohortEngine for AnalyticEngine {
         let mut info = self.model_info(&spec.model_dir)?;
         info.training_shapes.truncate(files);
         Ok(info)
+    }
+
+    /// The "latent" of a mesh is its bounding box's half extents (the semi-axes of an
+    /// ellipsoid); the Chamfer distance compares the mesh with that ellipsoid.
+    fn fit_anchor(
+        &self,
+        _: &Path,
+        spec: &FitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        anyhow::ensure!(!cancel.load(Ordering::SeqCst), "fit cancelled");
+        let mesh = aortagen::formats::read_mesh_file(&spec.mesh_path)?;
+        let bb = mesh.bounding_box().context("empty mesh")?;
+        let axes: [f64; 3] = std::array::from_fn(|k| 0.5 * (bb.max[k] - bb.min[k]));
+        let (unit, transform) = normalize_to_unit_ball(&mesh);
+        let fitted = ellipsoid_unit(axes, transform.radius);
+        progress.store(spec.iterations as u64, Ordering::SeqCst);
+        Ok(FittedAnchor {
+            latent: axes.iter().map(|&a| a as f32).collect(),
+            transform,
+            chamfer: chamfer_distance(&fitted.positions, &unit.positions),
+        })
     }
 }
 

@@ -7,6 +7,7 @@ mod conditioned;
 mod conformance;
 mod engine;
 mod errors;
+mod fit;
 mod helpers;
 mod jobs;
 mod limits;

@@ -69,6 +69,13 @@ pub struct CreateCohort {
     /// Most candidates drawn per shape when `targets` is set: 1–100, default 20.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_candidates: Option<i64>,
+    /// Fitted anchors (ids from `POST /v1/models/{id}/fit`, ready, of the same model) forced
+    /// into every shape: each shape mixes all of them plus `arity − len(anchors)` training
+    /// shapes drawn as usual, so `arity` counts the anchors (1 ≤ len ≤ arity, distinct).
+    /// Weights (explicit or drawn) list the training shapes first, then the anchors in this
+    /// order.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub anchors: Option<Vec<i64>>,
 }
 
 impl CreateCohort {
@@ -112,6 +119,9 @@ impl CreateCohort {
             }
         }
         self.targets()?;
+        if let Some(anchors) = &self.anchors {
+            check_anchor_list(anchors, self.arity)?;
+        }
         Ok(())
     }
 
@@ -153,6 +163,24 @@ impl CreateCohort {
         let canonical = serde_json::to_vec(self).expect("requests serialise");
         crate::jobs::cohort::hex(&Sha256::digest(canonical))
     }
+}
+
+/// The anchor list's own rules: 1 ≤ length ≤ arity, distinct ids.
+fn check_anchor_list(anchors: &[i64], arity: i64) -> Result<(), ApiError> {
+    if anchors.is_empty() || anchors.len() as i64 > arity {
+        let msg = format!(
+            "must list 1 to arity = {arity} anchors, got {}",
+            anchors.len()
+        );
+        return Err(ApiError::invalid("anchors", "length", msg));
+    }
+    for (i, id) in anchors.iter().enumerate() {
+        if anchors[..i].contains(id) {
+            let msg = format!("anchor {id} is listed twice");
+            return Err(ApiError::invalid(format!("anchors[{i}]"), "distinct", msg));
+        }
+    }
+    Ok(())
 }
 
 fn weights_error(message: &str) -> ApiError {
@@ -197,6 +225,9 @@ pub struct CohortView {
     pub selection: Selection,
     /// Smallest accepted Chamfer distance to a training shape, if any.
     pub min_novelty: Option<f64>,
+    /// Fitted anchors forced into every shape, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anchors: Option<Vec<i64>>,
     /// Redraws over the stored shapes (shapes closer than `min_novelty` to a training shape).
     pub redraws_total: i64,
     /// Target ranges of anatomical measurements (mm), if any.
@@ -283,6 +314,10 @@ impl CohortView {
             latent_noise: c.latent_noise,
             selection: Selection::parse(&c.selection).unwrap_or_default(),
             min_novelty: c.min_novelty,
+            anchors: c
+                .anchors
+                .as_deref()
+                .and_then(|a| serde_json::from_str(a).ok()),
             redraws_total: c.redraws_total,
             targets: c.targets.and_then(|t| serde_json::from_str(&t).ok()),
             max_candidates: c.max_candidates,

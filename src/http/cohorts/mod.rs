@@ -78,6 +78,10 @@ async fn create_cohort(
             .map_err(|e| ApiError::invalid(e.field(), "feasible", e.to_string()))?;
     }
     let targets_json = targets.map(|t| serde_json::to_string(&t.to_map()).expect("maps serialise"));
+    let anchors = match &req.anchors {
+        Some(ids) => crate::http::anchors::check_cohort_anchors(&state, &req.model_id, ids).await?,
+        None => Vec::new(),
+    };
     let fingerprint = req.fingerprint();
 
     let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
@@ -126,6 +130,9 @@ async fn create_cohort(
         },
     )
     .await?;
+    if !anchors.is_empty() {
+        db::anchors::set_cohort_anchors(&mut tx, cohort_id, &anchors).await?;
+    }
     let payload = serde_json::to_value(CohortPayload { cohort_id }).map_err(anyhow::Error::from)?;
     db::jobs::set_payload(&mut tx, job_id, &payload).await?;
     tx.commit().await?;
