@@ -9,18 +9,17 @@
 //!    several finest block sizes (deterministic);
 //! 4. `network`: the sparse path on a neural field, one run per resolution. Options:
 //!    `--net d,H` (geometric init, seed 1; repeatable) or `--model DIR` (first latent of a
-//!    saved model), `--resolution R` (repeatable; default 128 and 256), `--block B`.
+//!    saved model), `--resolution R` (repeatable; default 128 and 256), `--block B`,
+//!    `--tensor-forward` (burn's tensor forward pass instead of the host pass).
 //!
 //! All sections run when no section is named (`network` only with `--net`/`--model`).
 
 use aortagen::extract::analytic::Shape;
-use aortagen::extract::{
-    ExtractOptions, Extraction, ScalarField, extract_dense, extract_surface,
-};
+use aortagen::extract::{ExtractOptions, Extraction, ScalarField, extract_dense, extract_surface};
+use aortagen::geometry::marching_cubes::{Grid, marching_cubes};
 use aortagen::sdf::reconstruct::NeuralField;
 use aortagen::sdf::store::LoadedModel;
 use aortagen::sdf::{Backend, SdfField, SdfNetworkConfig};
-use aortagen::geometry::marching_cubes::{Grid, marching_cubes};
 use std::time::{Duration, Instant};
 
 /// Median wall time of `runs` calls after `warmup` untimed ones, and the last result.
@@ -137,7 +136,11 @@ fn hierarchy_counts() {
 }
 
 /// The neural fields named on the command line: `(label, field)`.
-fn neural_fields(nets: &[(usize, usize)], models: &[String]) -> Vec<(String, SdfField)> {
+fn neural_fields(
+    nets: &[(usize, usize)],
+    models: &[String],
+    tensor_forward: bool,
+) -> Vec<(String, SdfField)> {
     let mut out = Vec::new();
     let device = Backend::default().device(false).expect("default backend");
     for &(d, h) in nets {
@@ -150,13 +153,19 @@ fn neural_fields(nets: &[(usize, usize)], models: &[String]) -> Vec<(String, Sdf
         out.push((format!("net ({d},{h}) geometric init"), field));
     }
     for dir in models {
-        let model = LoadedModel::load(std::path::Path::new(dir), Backend::default())
-            .expect("model loads");
+        let model =
+            LoadedModel::load(std::path::Path::new(dir), Backend::default()).expect("model loads");
         let latent = model.latents().swap_remove(0);
         out.push((
             format!("model {dir} shape 0"),
             model.field(&latent).expect("latent fits"),
         ));
+    }
+    if tensor_forward {
+        out = out
+            .into_iter()
+            .map(|(label, f)| (format!("{label} tensor forward"), f.with_tensor_forward()))
+            .collect();
     }
     out
 }
@@ -166,8 +175,9 @@ fn network_extraction(
     models: &[String],
     resolutions: &[usize],
     block: usize,
+    tensor_forward: bool,
 ) {
-    for (label, field) in neural_fields(nets, models) {
+    for (label, field) in neural_fields(nets, models, tensor_forward) {
         let neural = NeuralField::new(&field).expect("finite field");
         let options = ExtractOptions {
             block_cells: block,
@@ -177,7 +187,11 @@ fn network_extraction(
             let start = Instant::now();
             let out = extract_surface(&neural, resolution, &options).expect("valid options");
             let t = start.elapsed();
-            report(&format!("network {label} R={resolution} B={block}"), t, &out);
+            report(
+                &format!("network {label} R={resolution} B={block}"),
+                t,
+                &out,
+            );
             println!(
                 "  {:.0} evaluations/s inside eval_batch; L = {:.3}",
                 out.evaluations.total() as f64 / out.timings.evaluation.as_secs_f64(),
@@ -190,7 +204,9 @@ fn network_extraction(
 fn main() {
     // `cargo bench --bench marching -- mc` runs only the sections whose name matches.
     let mut filters: Vec<String> = Vec::new();
-    let (mut nets, mut models, mut resolutions, mut block) = (Vec::new(), Vec::new(), Vec::new(), 2);
+    let (mut nets, mut models, mut resolutions, mut block) =
+        (Vec::new(), Vec::new(), Vec::new(), 2);
+    let mut tensor_forward = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = || args.next().unwrap_or_else(|| panic!("{a} needs a value"));
@@ -203,6 +219,7 @@ fn main() {
             "--model" => models.push(value()),
             "--resolution" => resolutions.push(value().parse().expect("--resolution R")),
             "--block" => block = value().parse().expect("--block B"),
+            "--tensor-forward" => tensor_forward = true,
             other if other.starts_with("--") => {} // cargo bench passes --bench
             other => filters.push(other.to_owned()),
         }
@@ -223,6 +240,6 @@ fn main() {
         hierarchy_counts();
     }
     if wanted("network") && !(nets.is_empty() && models.is_empty()) {
-        network_extraction(&nets, &models, &resolutions, block);
+        network_extraction(&nets, &models, &resolutions, block, tensor_forward);
     }
 }

@@ -157,7 +157,11 @@ fn the_block_hierarchy_evaluates_each_point_once_and_less_with_finer_blocks() {
             points.sort_unstable_by_key(|p| p.map(f32::to_bits));
             let evaluated = points.len();
             points.dedup();
-            assert_eq!(points.len(), evaluated, "{what}: a point was evaluated twice");
+            assert_eq!(
+                points.len(),
+                evaluated,
+                "{what}: a point was evaluated twice"
+            );
             let cost = e.block_centres + e.samples;
             assert!(cost < previous, "{what}: {cost} evaluations vs {previous}");
             previous = cost;

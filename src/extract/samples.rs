@@ -227,8 +227,7 @@ impl SampleCache {
         for lz in 0..=extent[2] {
             for ly in 0..=extent[1] {
                 for lx in 0..=extent[0] {
-                    let n =
-                        layout.sample_index([origin[0] + lx, origin[1] + ly, origin[2] + lz]);
+                    let n = layout.sample_index([origin[0] + lx, origin[1] + ly, origin[2] + lz]);
                     let (brick, at) = brick_of(n, self.resolution);
                     let slot = match last {
                         Some((key, slot)) if key == brick => slot,

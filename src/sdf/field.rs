@@ -254,7 +254,11 @@ mod tests {
         let device = Backend::Flex.device(false).unwrap();
         for (d, h) in [(8, 32), (8, 10), (16, 64)] {
             let config = SdfNetworkConfig::new().with_latent_dim(d).with_hidden(h);
-            let model = perturbed(SdfAutoDecoder::new(&config, 2, 5, &device).unwrap(), 9, 0.05);
+            let model = perturbed(
+                SdfAutoDecoder::new(&config, 2, 5, &device).unwrap(),
+                9,
+                0.05,
+            );
             let latent = model.latents_to_vec().swap_remove(1);
             let host = SdfField::new(&model.network, &latent).unwrap();
             assert!(host.uses_host_forward());
