@@ -226,8 +226,8 @@ impl HostForward {
 fn add_x_rows(row: &mut [f32], p: &[f32; 3], x_rows: &[f32], offset: &[f32]) {
     let h = row.len();
     let (a, b, c) = (&x_rows[..h], &x_rows[h..2 * h], &x_rows[2 * h..3 * h]);
-    for j in 0..h {
-        row[j] += offset[j] + p[0] * a[j] + p[1] * b[j] + p[2] * c[j];
+    for ((((v, o), a), b), c) in row.iter_mut().zip(offset).zip(a).zip(b).zip(c) {
+        *v += o + p[0] * a + p[1] * b + p[2] * c;
     }
 }
 
@@ -251,8 +251,8 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
         .map(|(x, y)| x * y)
         .sum();
     for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            acc[k] += x[k] * y[k];
+        for ((s, x), y) in acc.iter_mut().zip(x).zip(y) {
+            *s += x * y;
         }
     }
     acc.iter().sum::<f32>() + tail
