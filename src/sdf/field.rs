@@ -79,6 +79,7 @@ impl SdfField {
 
     /// Evaluates through the tensor forward pass even where the host pass applies (the
     /// reference the host pass is checked against).
+    #[cfg_attr(not(feature = "flex"), allow(unused_mut))]
     pub fn with_tensor_forward(mut self) -> Self {
         #[cfg(feature = "flex")]
         {
