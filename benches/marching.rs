@@ -1,14 +1,25 @@
 //! Marching-cubes and extraction benchmarks.
 //!
-//! Run with `cargo bench --bench marching [-- mc|extract]`. Prints the median of several runs of
-//! 1. dense marching cubes on R³ grids (R = 256, 128) of the reference scene of
+//! Run with `cargo bench --bench marching [-- mc|extract|counts|network]`. Prints
+//! 1. `mc`: dense marching cubes on R³ grids (R = 256, 128) of the reference scene of
 //!    peers/bench_marching_cubes.py (torus ∪ two spheres ∪ ellipsoid) and of a sphere;
-//! 2. sparse vs dense extraction from the analytic scene as a field at R = 256
-//!    (evaluations and time), and the sparse path alone at R = 512 with peak memory.
+//! 2. `extract`: sparse vs dense extraction from the analytic scene as a field at R = 256
+//!    (evaluations and time), and the sparse path alone at R = 512 with peak memory;
+//! 3. `counts`: evaluations of the sparse path on the analytic scene at R = 128/256/512 for
+//!    several finest block sizes (deterministic);
+//! 4. `network`: the sparse path on a neural field, one run per resolution. Options:
+//!    `--net d,H` (geometric init, seed 1; repeatable) or `--model DIR` (first latent of a
+//!    saved model), `--resolution R` (repeatable; default 128 and 256), `--block B`,
+//!    `--tensor-forward` (burn's tensor forward pass instead of the host pass).
+//!
+//! All sections run when no section is named (`network` only with `--net`/`--model`).
 
 use aortagen::extract::analytic::Shape;
-use aortagen::extract::{ExtractOptions, Extraction, extract_dense, extract_surface};
+use aortagen::extract::{ExtractOptions, Extraction, ScalarField, extract_dense, extract_surface};
 use aortagen::geometry::marching_cubes::{Grid, marching_cubes};
+use aortagen::sdf::reconstruct::NeuralField;
+use aortagen::sdf::store::LoadedModel;
+use aortagen::sdf::{Backend, SdfField, SdfNetworkConfig};
 use std::time::{Duration, Instant};
 
 /// Median wall time of `runs` calls after `warmup` untimed ones, and the last result.
@@ -105,12 +116,117 @@ fn sparse_vs_dense() {
     );
 }
 
+fn hierarchy_counts() {
+    let scene = Shape::benchmark_scene();
+    for resolution in [128, 256, 512] {
+        for block_cells in [8, 4, 2] {
+            let options = ExtractOptions {
+                block_cells,
+                ..Default::default()
+            };
+            let start = Instant::now();
+            let out = extract_surface(&scene, resolution, &options).expect("valid options");
+            report(
+                &format!("counts scene R={resolution} B={block_cells}"),
+                start.elapsed(),
+                &out,
+            );
+        }
+    }
+}
+
+/// The neural fields named on the command line: `(label, field)`.
+fn neural_fields(
+    nets: &[(usize, usize)],
+    models: &[String],
+    tensor_forward: bool,
+) -> Vec<(String, SdfField)> {
+    let mut out = Vec::new();
+    let device = Backend::default().device(false).expect("default backend");
+    for &(d, h) in nets {
+        let network = SdfNetworkConfig::new()
+            .with_latent_dim(d)
+            .with_hidden(h)
+            .init(1, &device)
+            .expect("valid network size");
+        let field = SdfField::new(&network, &vec![0.0; d]).expect("latent of length d");
+        out.push((format!("net ({d},{h}) geometric init"), field));
+    }
+    for dir in models {
+        let model =
+            LoadedModel::load(std::path::Path::new(dir), Backend::default()).expect("model loads");
+        let latent = model.latents().swap_remove(0);
+        out.push((
+            format!("model {dir} shape 0"),
+            model.field(&latent).expect("latent fits"),
+        ));
+    }
+    if tensor_forward {
+        out = out
+            .into_iter()
+            .map(|(label, f)| (format!("{label} tensor forward"), f.with_tensor_forward()))
+            .collect();
+    }
+    out
+}
+
+fn network_extraction(
+    nets: &[(usize, usize)],
+    models: &[String],
+    resolutions: &[usize],
+    block: usize,
+    tensor_forward: bool,
+) {
+    for (label, field) in neural_fields(nets, models, tensor_forward) {
+        let neural = NeuralField::new(&field).expect("finite field");
+        let options = ExtractOptions {
+            block_cells: block,
+            ..Default::default()
+        };
+        for &resolution in resolutions {
+            let start = Instant::now();
+            let out = extract_surface(&neural, resolution, &options).expect("valid options");
+            let t = start.elapsed();
+            report(
+                &format!("network {label} R={resolution} B={block}"),
+                t,
+                &out,
+            );
+            println!(
+                "  {:.0} evaluations/s inside eval_batch; L = {:.3}",
+                out.evaluations.total() as f64 / out.timings.evaluation.as_secs_f64(),
+                neural.lipschitz_bound()
+            );
+        }
+    }
+}
+
 fn main() {
     // `cargo bench --bench marching -- mc` runs only the sections whose name matches.
-    let filters: Vec<String> = std::env::args()
-        .skip(1)
-        .filter(|a| !a.starts_with("--"))
-        .collect();
+    let mut filters: Vec<String> = Vec::new();
+    let (mut nets, mut models, mut resolutions, mut block) =
+        (Vec::new(), Vec::new(), Vec::new(), 2);
+    let mut tensor_forward = false;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        let mut value = || args.next().unwrap_or_else(|| panic!("{a} needs a value"));
+        match a.as_str() {
+            "--net" => {
+                let v = value();
+                let (d, h) = v.split_once(',').expect("--net d,H");
+                nets.push((d.parse().expect("d"), h.parse().expect("H")));
+            }
+            "--model" => models.push(value()),
+            "--resolution" => resolutions.push(value().parse().expect("--resolution R")),
+            "--block" => block = value().parse().expect("--block B"),
+            "--tensor-forward" => tensor_forward = true,
+            other if other.starts_with("--") => {} // cargo bench passes --bench
+            other => filters.push(other.to_owned()),
+        }
+    }
+    if resolutions.is_empty() {
+        resolutions = vec![128, 256];
+    }
     let wanted =
         |name: &str| filters.is_empty() || filters.iter().any(|f| name.contains(f.as_str()));
     println!("threads: {}", rayon::current_num_threads());
@@ -119,5 +235,11 @@ fn main() {
     }
     if wanted("extract") {
         sparse_vs_dense();
+    }
+    if wanted("counts") {
+        hierarchy_counts();
+    }
+    if wanted("network") && !(nets.is_empty() && models.is_empty()) {
+        network_extraction(&nets, &models, &resolutions, block, tensor_forward);
     }
 }

@@ -114,6 +114,61 @@ fn odd_block_sizes_and_batches_give_the_same_surface() {
     }
 }
 
+/// Records every point evaluated without gradients.
+struct Recording {
+    shape: Shape,
+    points: std::sync::Mutex<Vec<[f32; 3]>>,
+}
+
+impl ScalarField for Recording {
+    fn eval_batch(&self, points: &[[f32; 3]], values: &mut [f32], g: Option<&mut [[f32; 3]]>) {
+        if g.is_none() {
+            self.points.lock().unwrap().extend_from_slice(points);
+        }
+        self.shape.eval_batch(points, values, g);
+    }
+    fn lipschitz_bound(&self) -> f32 {
+        1.0
+    }
+}
+
+/// Finer finest blocks mean fewer evaluations, never a different mesh, and no point is
+/// evaluated twice (block centres are reused as grid samples).
+#[test]
+fn the_block_hierarchy_evaluates_each_point_once_and_less_with_finer_blocks() {
+    for (name, shape) in scenes() {
+        let dense = extract_dense(&shape, 97, &ExtractOptions::default()).unwrap();
+        let mut previous = u64::MAX;
+        for block_cells in [16, 8, 4, 2] {
+            let field = Recording {
+                shape: shape.clone(),
+                points: Default::default(),
+            };
+            let options = ExtractOptions {
+                block_cells,
+                ..Default::default()
+            };
+            let sparse = extract_surface(&field, 97, &options).unwrap();
+            let what = format!("{name}, block {block_cells}");
+            assert_same_surface(&sparse.mesh, &dense.mesh, &what);
+            let mut points = field.points.into_inner().unwrap();
+            let e = sparse.evaluations;
+            assert_eq!(points.len() as u64, e.block_centres + e.samples, "{what}");
+            points.sort_unstable_by_key(|p| p.map(f32::to_bits));
+            let evaluated = points.len();
+            points.dedup();
+            assert_eq!(
+                points.len(),
+                evaluated,
+                "{what}: a point was evaluated twice"
+            );
+            let cost = e.block_centres + e.samples;
+            assert!(cost < previous, "{what}: {cost} evaluations vs {previous}");
+            previous = cost;
+        }
+    }
+}
+
 #[test]
 fn sparse_sampling_of_a_sphere_costs_a_fraction_of_the_dense_grid() {
     let sphere = Shape::Sphere {

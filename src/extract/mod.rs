@@ -1,12 +1,16 @@
 //! Fast surface extraction from an implicit field (the neural SDF, or an analytic one).
 //!
 //! [`extract_surface`] evaluates the field only near its zero level: a coarse-to-fine pass over
-//! blocks of cells keeps a block when `|f(centre)| ≤ L · half-diagonal · safety` (L = the field's
-//! Lipschitz bound). A block that contains any surface point passes this test whatever the
-//! sign pattern at its corners, so thin parts that a sign-change test would miss are kept.
-//! The fine grid is then sampled only inside kept blocks, each sample once, and polygonised
-//! with the very cell code of [`crate::geometry::marching_cubes`] — so the mesh equals the
-//! dense R³ path ([`extract_dense`]) vertex for vertex when L really bounds the gradient.
+//! blocks of cells (≤ 4 blocks per axis at the top, halving the edge at every level down to
+//! [`ExtractOptions::block_cells`], 2 by default) keeps a block when `|f(centre)| ≤ L ·
+//! half-diagonal · safety` (L = the field's Lipschitz bound) and splits it into its eight
+//! children. A block that contains any surface point passes this test whatever the sign
+//! pattern at its corners, so thin parts that a sign-change test would miss are kept. Block
+//! centres of even edge are grid samples: their values are cached by grid index with the
+//! samples taken afterwards, so no point is evaluated twice. The fine grid is then sampled
+//! only at the corners of the kept finest blocks and polygonised with the very cell code of
+//! [`crate::geometry::marching_cubes`] — so the mesh equals the dense R³ path
+//! ([`extract_dense`]) vertex for vertex when L really bounds the gradient.
 //!
 //! **Batching and parallelism.** Points go to [`ScalarField::eval_batch`] in batches of
 //! [`ExtractOptions::batch_size`] (default 32 768, large enough for big matrix products). With
@@ -73,7 +77,9 @@ pub struct ExtractOptions {
     pub max: f32,
     /// Level set to extract (0 for a signed distance).
     pub iso: f32,
-    /// Edge length of the finest blocks, in cells.
+    /// Edge length of the finest blocks, in cells: their corner samples are all evaluated.
+    /// 2 costs the fewest evaluations (the band of kept cells hugs the surface); larger
+    /// blocks trade evaluations for fewer, larger polygonisation tasks.
     pub block_cells: usize,
     /// Factor on the Lipschitz bound when culling blocks (margin for fields whose bound is
     /// only approximate, such as a trained network).
@@ -96,7 +102,7 @@ impl Default for ExtractOptions {
             min: -1.0,
             max: 1.0,
             iso: 0.0,
-            block_cells: 8,
+            block_cells: 2,
             safety: 1.5,
             batch_size: 32_768,
             parallelism: Parallelism::InsideField,
@@ -109,9 +115,10 @@ impl Default for ExtractOptions {
 /// Field evaluations spent by an extraction, by purpose.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Evaluations {
-    /// Block centres tested on all levels (zero on the dense path).
+    /// Block centres evaluated on all levels (zero on the dense path); centres that are
+    /// grid samples count here only, not again under `samples`.
     pub block_centres: u64,
-    /// Grid samples (R³ on the dense path).
+    /// Grid samples evaluated after culling (R³ on the dense path).
     pub samples: u64,
     /// Points evaluated with gradients for vertex normals.
     pub normals: u64,

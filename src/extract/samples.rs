@@ -1,14 +1,17 @@
-//! The block layout of the fine grid and the store of grid samples taken in kept blocks.
+//! The block layout of the fine grid and the cache of field values at grid samples.
 //!
-//! Block `b` covers cells `[b·B, b·B + B)` per axis (clipped to the grid) and *owns* the
-//! samples `[b·B, b·B + B)`; the corners on its upper faces are owned by its upper
-//! neighbours. Each needed sample is evaluated once, in its owner's B³ array, so neighbouring
-//! blocks share their face samples without a per-sample hash map and without any R³ array.
+//! Block `b` at a level of span `s` cells covers cells `[b·s, b·s + s)` per axis (clipped to
+//! the grid). Every value taken at a grid sample — a block centre on the culling levels, or a
+//! cell corner of a kept finest block — goes into one cache keyed by the sample's grid index,
+//! so each sample is evaluated at most once whoever needs it, and no R³ array exists (only
+//! the 8³ bricks of samples that were needed).
 
 use super::ExtractError;
 use super::evaluate::Evaluator;
 use crate::geometry::marching_cubes::Grid;
+use rayon::prelude::*;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 /// Sizes of the block decomposition of an R³ grid.
 pub(crate) struct Layout {
@@ -16,12 +19,22 @@ pub(crate) struct Layout {
     pub(crate) resolution: usize,
     /// Cells per axis (R − 1).
     pub(crate) cells: usize,
-    /// Cells per block edge (B).
+    /// Cells per finest block edge (B).
     pub(crate) block_cells: usize,
-    /// Blocks per axis, ⌈(R − 1) / B⌉.
+    /// Finest blocks per axis, ⌈(R − 1) / B⌉.
     pub(crate) blocks: usize,
     /// Sample coordinates along one axis.
     pub(crate) coords: Vec<f32>,
+}
+
+/// Where a block's culling test evaluates the field and how far its cells reach from there.
+pub(crate) struct Probe {
+    /// The point evaluated.
+    pub(crate) point: [f32; 3],
+    /// Largest distance from `point` to any point of the block's (clipped) cells.
+    pub(crate) radius: f32,
+    /// The point's grid index when it is a grid sample (then its value is cached).
+    pub(crate) sample: Option<u64>,
 }
 
 impl Layout {
@@ -36,127 +49,200 @@ impl Layout {
         }
     }
 
-    /// Centre and half-diagonal of a block spanning `span` cells per axis (clipped to the grid).
-    pub(crate) fn centre_and_radius(&self, block: [u32; 3], span: usize) -> ([f32; 3], f32) {
-        let lo = block.map(|b| self.coords[b as usize * span]);
-        let hi = block.map(|b| self.coords[(b as usize * span + span).min(self.cells)]);
-        let centre = std::array::from_fn(|k| 0.5 * (lo[k] + hi[k]));
-        let radius = 0.5 * (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt();
-        (centre, radius)
-    }
-}
-
-fn key(block: [u32; 3]) -> u64 {
-    u64::from(block[0]) | u64::from(block[1]) << 21 | u64::from(block[2]) << 42
-}
-
-/// Field values at the samples of kept blocks, grouped by owner block.
-pub(crate) struct SampleStore {
-    slot_of: HashMap<u64, usize>,
-    values: Vec<f32>,
-    /// Samples evaluated.
-    pub(crate) evaluated: u64,
-}
-
-impl SampleStore {
-    /// Evaluates every sample that is a corner of a cell in `blocks`, each exactly once.
-    pub(crate) fn evaluate(
-        layout: &Layout,
-        blocks: &[[u32; 3]],
-        evaluator: &mut Evaluator<'_>,
-    ) -> Result<Self, ExtractError> {
-        let b = layout.block_cells;
-        // Owner block → which kept blocks (offset d ∈ {0,1}³ below it) need its samples.
-        let mut needers: HashMap<u64, ([u32; 3], u8)> = HashMap::with_capacity(blocks.len() * 2);
-        for block in blocks {
-            for d in 0..8u32 {
-                let owner = [
-                    block[0] + (d & 1),
-                    block[1] + (d >> 1 & 1),
-                    block[2] + (d >> 2),
-                ];
-                if owner.iter().all(|&o| (o as usize) * b < layout.resolution) {
-                    needers.entry(key(owner)).or_insert((owner, 0)).1 |= 1 << d;
-                }
-            }
-        }
-        let mut owners: Vec<([u32; 3], u8)> = needers.into_values().collect();
-        owners.sort_unstable_by_key(|o| key(o.0));
-        let cube = b * b * b;
-        let mut store = Self {
-            slot_of: owners
-                .iter()
-                .enumerate()
-                .map(|(n, o)| (key(o.0), n))
-                .collect(),
-            values: vec![f32::NAN; owners.len() * cube],
-            evaluated: 0,
-        };
-        let chunk_points = evaluator_chunk(evaluator);
-        let mut points = Vec::with_capacity(chunk_points + cube);
-        let mut targets = Vec::with_capacity(chunk_points + cube);
-        for (slot, &(owner, mask)) in owners.iter().enumerate() {
-            // A sample at local l is needed by the block at offset d (below the owner) when
-            // l is 0 on every axis where d steps down.
-            let needed: [bool; 8] = std::array::from_fn(|zero_axes| {
-                (0..8).any(|d| mask >> d & 1 == 1 && d & !zero_axes == 0)
-            });
-            let extent = owner.map(|o| b.min(layout.resolution - o as usize * b));
-            for lz in 0..extent[2] {
-                for ly in 0..extent[1] {
-                    for lx in 0..extent[0] {
-                        let zero_axes = usize::from(lx == 0)
-                            | usize::from(ly == 0) << 1
-                            | usize::from(lz == 0) << 2;
-                        if !needed[zero_axes] {
-                            continue;
-                        }
-                        let s = [lx, ly, lz];
-                        let g: [usize; 3] = std::array::from_fn(|k| owner[k] as usize * b + s[k]);
-                        points.push(g.map(|i| layout.coords[i]));
-                        targets.push(slot * cube + lx + b * (ly + b * lz));
-                    }
-                }
-            }
-            if points.len() >= chunk_points || slot + 1 == owners.len() {
-                let values = evaluator.values(&points)?;
-                for (&t, v) in targets.iter().zip(values) {
-                    store.values[t] = v;
-                }
-                store.evaluated += points.len() as u64;
-                points.clear();
-                targets.clear();
-            }
-        }
-        Ok(store)
+    /// Linear grid index of sample `g` (x fastest).
+    pub(crate) fn sample_index(&self, g: [usize; 3]) -> u64 {
+        let r = self.resolution as u64;
+        g[0] as u64 + r * (g[1] as u64 + r * g[2] as u64)
     }
 
-    /// The (B+1)³ corner samples of a kept block, x fastest (entries past a clipped block's
-    /// last cell are NaN and never read).
-    pub(crate) fn gather(&self, layout: &Layout, block: [u32; 3]) -> Vec<f32> {
-        let b = layout.block_cells;
-        let side = b + 1;
-        let cube = b * b * b;
-        let owner_slot: [Option<usize>; 8] = std::array::from_fn(|d| {
-            let d = d as u32;
-            let owner = [
-                block[0] + (d & 1),
-                block[1] + (d >> 1 & 1),
-                block[2] + (d >> 2),
-            ];
-            self.slot_of.get(&key(owner)).copied()
-        });
-        let extent = block.map(|o| b.min(layout.cells - o as usize * b));
-        let mut out = vec![f32::NAN; side * side * side];
+    /// Position of the sample with linear index `n`.
+    fn sample_point(&self, n: u64) -> [f32; 3] {
+        let r = self.resolution as u64;
+        [n % r, n / r % r, n / (r * r)].map(|i| self.coords[i as usize])
+    }
+
+    /// The culling probe of a block spanning `span` cells per axis. With an even span the
+    /// probe is the grid sample at the block's centre (its value is then shared with the
+    /// finer levels and the final sampling); otherwise the centre of the clipped box.
+    pub(crate) fn probe(&self, block: [u32; 3], span: usize) -> Probe {
+        let lo = block.map(|b| b as usize * span);
+        let hi = lo.map(|l| (l + span).min(self.cells));
+        let centre = lo.map(|l| l + span / 2);
+        if span % 2 == 0 && centre.iter().all(|&c| c <= self.cells) {
+            let point = centre.map(|c| self.coords[c]);
+            let radius = (0..3)
+                .map(|k| {
+                    let below = point[k] - self.coords[lo[k]];
+                    let above = self.coords[hi[k]] - point[k];
+                    below.max(above).powi(2)
+                })
+                .sum::<f32>()
+                .sqrt();
+            return Probe {
+                point,
+                radius,
+                sample: Some(self.sample_index(centre)),
+            };
+        }
+        let (lo, hi) = (lo.map(|i| self.coords[i]), hi.map(|i| self.coords[i]));
+        Probe {
+            point: std::array::from_fn(|k| 0.5 * (lo[k] + hi[k])),
+            radius: 0.5 * (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt(),
+            sample: None,
+        }
+    }
+
+    /// Grid indices of the (B+1)³ corner samples of a finest block (clipped to the grid).
+    fn block_samples(&self, block: [u32; 3], out: &mut Vec<u64>) {
+        let b = self.block_cells;
+        let origin = block.map(|x| x as usize * b);
+        let extent = origin.map(|o| b.min(self.cells - o));
         for lz in 0..=extent[2] {
             for ly in 0..=extent[1] {
                 for lx in 0..=extent[0] {
-                    let up = [lx, ly, lz].map(|l| usize::from(l == b));
-                    let d = up[0] | up[1] << 1 | up[2] << 2;
-                    let slot = owner_slot[d].expect("owner of a needed sample was evaluated");
-                    let (x, y, z) = (lx - up[0] * b, ly - up[1] * b, lz - up[2] * b);
-                    out[lx + side * (ly + side * lz)] =
-                        self.values[slot * cube + x + b * (y + b * z)];
+                    out.push(self.sample_index([origin[0] + lx, origin[1] + ly, origin[2] + lz]));
+                }
+            }
+        }
+    }
+}
+
+/// A multiplicative hash for grid indices (the default SipHash costs more than the lookup).
+#[derive(Default, Clone, Copy)]
+pub(crate) struct IndexHasher(u64);
+
+impl Hasher for IndexHasher {
+    fn finish(&self) -> u64 {
+        let x = self.0.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        x ^ (x >> 31)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = self.0.rotate_left(8) ^ u64::from(b);
+        }
+    }
+
+    fn write_u64(&mut self, n: u64) {
+        self.0 ^= n;
+    }
+}
+
+/// Samples per brick edge (a power of two): the cache stores values in 8³ bricks so that
+/// neighbouring samples share memory pages, not one hash entry each.
+const BRICK_SHIFT: u32 = 3;
+const BRICK: usize = 1 << BRICK_SHIFT;
+const BRICK_VALUES: usize = BRICK * BRICK * BRICK;
+
+/// Field values at grid samples, each evaluated once. Values live in dense 8³ bricks found
+/// through a hash map by brick index (NaN marks a sample not evaluated yet; evaluated
+/// values are finite).
+pub(crate) struct SampleCache {
+    resolution: u64,
+    bricks: HashMap<u64, usize, BuildHasherDefault<IndexHasher>>,
+    values: Vec<f32>,
+}
+
+/// Brick key and the offset inside the brick of grid index `n`.
+fn brick_of(n: u64, r: u64) -> (u64, usize) {
+    let g = [n % r, n / r % r, n / (r * r)];
+    let b = g.map(|c| c >> BRICK_SHIFT);
+    let mask = (BRICK - 1) as u64;
+    let l = g.map(|c| (c & mask) as usize);
+    (
+        b[0] | b[1] << 21 | b[2] << 42,
+        l[0] + BRICK * (l[1] + BRICK * l[2]),
+    )
+}
+
+impl SampleCache {
+    pub(crate) fn new(layout: &Layout) -> Self {
+        Self {
+            resolution: layout.resolution as u64,
+            bricks: HashMap::default(),
+            values: Vec::new(),
+        }
+    }
+
+    /// The cached value at grid index `n`.
+    pub(crate) fn get(&self, n: u64) -> Option<f32> {
+        let (brick, at) = brick_of(n, self.resolution);
+        let slot = *self.bricks.get(&brick)?;
+        let v = self.values[slot * BRICK_VALUES + at];
+        (!v.is_nan()).then_some(v)
+    }
+
+    /// Stores the value at grid index `n`.
+    pub(crate) fn insert(&mut self, n: u64, value: f32) {
+        let (brick, at) = brick_of(n, self.resolution);
+        let next = self.bricks.len();
+        let slot = *self.bricks.entry(brick).or_insert(next);
+        if slot == next {
+            self.values.resize((next + 1) * BRICK_VALUES, f32::NAN);
+        }
+        self.values[slot * BRICK_VALUES + at] = value;
+    }
+
+    /// Evaluates every corner sample of `blocks` that is not cached yet, each once. Returns
+    /// the number of field evaluations made.
+    pub(crate) fn fill_blocks(
+        &mut self,
+        layout: &Layout,
+        blocks: &[[u32; 3]],
+        evaluator: &mut Evaluator<'_>,
+    ) -> Result<u64, ExtractError> {
+        let mut wanted: Vec<u64> = blocks
+            .par_chunks(1024)
+            .flat_map_iter(|chunk| {
+                let mut out = Vec::new();
+                for &block in chunk {
+                    layout.block_samples(block, &mut out);
+                }
+                out
+            })
+            .collect();
+        wanted.par_sort_unstable();
+        wanted.dedup();
+        wanted.retain(|&n| self.get(n).is_none());
+        let chunk = evaluator_chunk(evaluator);
+        for part in wanted.chunks(chunk) {
+            let points: Vec<[f32; 3]> = part.iter().map(|&n| layout.sample_point(n)).collect();
+            let values = evaluator.values(&points)?;
+            for (&n, v) in part.iter().zip(values) {
+                self.insert(n, v);
+            }
+        }
+        Ok(wanted.len() as u64)
+    }
+
+    /// The (B+1)³ corner samples of a kept finest block, x fastest (entries past a clipped
+    /// block's last cell are NaN and never read).
+    pub(crate) fn gather(&self, layout: &Layout, block: [u32; 3]) -> Vec<f32> {
+        let b = layout.block_cells;
+        let side = b + 1;
+        let origin = block.map(|x| x as usize * b);
+        let extent = origin.map(|o| b.min(layout.cells - o));
+        let mut out = vec![f32::NAN; side * side * side];
+        let mut last: Option<(u64, usize)> = None;
+        for lz in 0..=extent[2] {
+            for ly in 0..=extent[1] {
+                for lx in 0..=extent[0] {
+                    let n = layout.sample_index([origin[0] + lx, origin[1] + ly, origin[2] + lz]);
+                    let (brick, at) = brick_of(n, self.resolution);
+                    let slot = match last {
+                        Some((key, slot)) if key == brick => slot,
+                        _ => {
+                            let slot = *self
+                                .bricks
+                                .get(&brick)
+                                .expect("corner samples of kept blocks were evaluated");
+                            last = Some((brick, slot));
+                            slot
+                        }
+                    };
+                    let v = self.values[slot * BRICK_VALUES + at];
+                    debug_assert!(!v.is_nan(), "corner samples of kept blocks were evaluated");
+                    out[lx + side * (ly + side * lz)] = v;
                 }
             }
         }
@@ -164,7 +250,7 @@ impl SampleStore {
     }
 }
 
-/// Points gathered before each evaluation call: enough for several full batches.
+/// Points per evaluation call: enough for several full batches.
 fn evaluator_chunk(evaluator: &Evaluator<'_>) -> usize {
     evaluator.batch_size() * rayon::current_num_threads().max(2) * 2
 }

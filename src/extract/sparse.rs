@@ -3,7 +3,7 @@
 //! their global grid-edge id.
 
 use super::evaluate::{Evaluator, finish};
-use super::samples::{Layout, SampleStore};
+use super::samples::{Layout, Probe, SampleCache};
 use super::{Evaluations, ExtractError, ExtractOptions, Extraction, ScalarField, Timings};
 use crate::geometry::TriMesh;
 use crate::geometry::mc_cell::{
@@ -30,16 +30,17 @@ pub fn extract_surface(
     }
     let layout = Layout::new(&grid, options.block_cells);
     let mut evaluator = Evaluator::new(field, options);
+    let mut cache = SampleCache::new(&layout);
     let (blocks, block_centres) = cull(
         &layout,
+        &mut cache,
         &mut evaluator,
         lipschitz * options.safety,
         options.iso,
     )?;
-    let samples = SampleStore::evaluate(&layout, &blocks, &mut evaluator)?;
-    let mesh = polygonise(&layout, &blocks, &samples, options.iso);
-    let sample_count = samples.evaluated;
-    drop(samples);
+    let sample_count = cache.fill_blocks(&layout, &blocks, &mut evaluator)?;
+    let mesh = polygonise(&layout, &blocks, &cache, options.iso);
+    drop(cache);
     let (mesh, normals, removed_components) = finish(mesh, &mut evaluator, options);
     let total = start.elapsed();
     Ok(Extraction {
@@ -58,11 +59,13 @@ pub fn extract_surface(
     })
 }
 
-/// Finest blocks that may hold surface, found level by level from a coarse block grid
-/// (a block is subdivided when `|f(centre) − iso| ≤ bound · half-diagonal`). Returns them
-/// sorted, and the number of centres evaluated.
+/// Finest blocks that may hold surface, found level by level from a coarse block grid (a
+/// block is split into its 8 children when `|f(probe) − iso| ≤ bound · radius`, where the
+/// probe ball covers the block). Probes at grid samples go through `cache`. Returns the
+/// finest blocks sorted, and the number of field evaluations made.
 fn cull(
     layout: &Layout,
+    cache: &mut SampleCache,
     evaluator: &mut Evaluator<'_>,
     bound: f32,
     iso: f32,
@@ -78,18 +81,37 @@ fn cull(
     let mut evaluated = 0u64;
     loop {
         let span = layout.block_cells << level;
-        let boxes: Vec<([f32; 3], f32)> = candidates
-            .iter()
-            .map(|b| layout.centre_and_radius(*b, span))
+        let probes: Vec<Probe> = candidates
+            .par_iter()
+            .map(|b| layout.probe(*b, span))
             .collect();
-        let centres: Vec<[f32; 3]> = boxes.iter().map(|b| b.0).collect();
-        let values = evaluator.values(&centres)?;
-        evaluated += centres.len() as u64;
+        // Probes not answered by the cache, each once.
+        let fresh: Vec<usize> = probes
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.sample.is_none_or(|n| cache.get(n).is_none()))
+            .map(|(i, _)| i)
+            .collect();
+        let points: Vec<[f32; 3]> = fresh.iter().map(|&i| probes[i].point).collect();
+        let fresh_values = evaluator.values(&points)?;
+        evaluated += points.len() as u64;
+        let mut values = vec![0.0f32; probes.len()];
+        for (&i, &v) in fresh.iter().zip(&fresh_values) {
+            values[i] = v;
+            if let Some(n) = probes[i].sample {
+                cache.insert(n, v);
+            }
+        }
+        for (v, p) in values.iter_mut().zip(&probes) {
+            if let Some(n) = p.sample {
+                *v = cache.get(n).expect("probe value was cached");
+            }
+        }
         let kept = candidates
             .iter()
-            .zip(&boxes)
+            .zip(&probes)
             .zip(&values)
-            .filter(|((_, (_, radius)), v)| (**v - iso).abs() <= bound * radius)
+            .filter(|((_, p), v)| (**v - iso).abs() <= bound * p.radius)
             .map(|((b, _), _)| *b);
         if level == 0 {
             let mut fine: Vec<[u32; 3]> = kept.collect();
@@ -120,7 +142,7 @@ struct BlockMesh {
     triangles: Vec<[u32; 3]>,
 }
 
-fn polygonise(layout: &Layout, blocks: &[[u32; 3]], samples: &SampleStore, iso: f32) -> TriMesh {
+fn polygonise(layout: &Layout, blocks: &[[u32; 3]], samples: &SampleCache, iso: f32) -> TriMesh {
     let parts: Vec<BlockMesh> = blocks
         .par_iter()
         .map(|&b| polygonise_block(layout, b, &samples.gather(layout, b), iso))

@@ -2,7 +2,9 @@
 //!
 //! The latent's contribution to layer 0 and to the skip layer (`z·W_z + b`) is computed once
 //! when the field is built; each evaluation then only multiplies the points' own activations.
-//! Points are processed in chunks so memory stays bounded for dense grids.
+//! Points are processed in chunks so memory stays bounded for dense grids. With f32 weights
+//! on the Flex backend the host forward pass of [`super::infer`] does the work (fused
+//! softplus, parallel chunks); otherwise the tensor forward of [`SdfNetwork::evaluate`].
 
 use burn::module::Module;
 use burn::tensor::{Tensor, TensorData};
@@ -42,6 +44,8 @@ pub struct SdfField {
     network: SdfNetwork,
     offsets: LatentOffsets,
     chunk_points: usize,
+    #[cfg(feature = "flex")]
+    host: Option<super::infer::HostForward>,
 }
 
 impl SdfField {
@@ -60,11 +64,40 @@ impl SdfField {
             (&network.device(), network.dtype()),
         );
         let offsets = network.latent_offsets(z);
+        #[cfg(feature = "flex")]
+        let host = (super::infer::supported(&network)
+            && network.device() == burn::tensor::Device::flex())
+        .then(|| super::infer::HostForward::new(&network, &offsets));
         Ok(Self {
             network,
             offsets,
             chunk_points: DEFAULT_CHUNK_POINTS,
+            #[cfg(feature = "flex")]
+            host,
         })
+    }
+
+    /// Evaluates through the tensor forward pass even where the host pass applies (the
+    /// reference the host pass is checked against).
+    #[cfg_attr(not(feature = "flex"), allow(unused_mut))]
+    pub fn with_tensor_forward(mut self) -> Self {
+        #[cfg(feature = "flex")]
+        {
+            self.host = None;
+        }
+        self
+    }
+
+    /// Whether evaluations run on the host forward pass.
+    pub fn uses_host_forward(&self) -> bool {
+        #[cfg(feature = "flex")]
+        {
+            self.host.is_some()
+        }
+        #[cfg(not(feature = "flex"))]
+        {
+            false
+        }
     }
 
     /// Sets the number of points per network call (at least 1).
@@ -96,6 +129,11 @@ impl SdfField {
                 len: g.len(),
                 points: n,
             });
+        }
+        #[cfg(feature = "flex")]
+        if let Some(host) = &self.host {
+            host.eval(points, values, gradients);
+            return Ok(());
         }
         let (device, dtype) = (self.network.device(), self.network.dtype());
         for (c, chunk) in points.chunks(self.chunk_points).enumerate() {
@@ -208,6 +246,48 @@ mod tests {
         let mut only_f = vec![0.0; pts.len()];
         field.eval_batch(&pts, &mut only_f, None);
         assert_eq!(only_f, f);
+    }
+
+    /// The host forward pass against the tensor forward it replaces, f and ∇ₓf, on networks
+    /// with and without the narrowed layer before the skip, across chunk boundaries.
+    #[test]
+    fn host_forward_equals_the_tensor_forward() {
+        let device = Backend::Flex.device(false).unwrap();
+        for (d, h) in [(8, 32), (8, 10), (16, 64)] {
+            let config = SdfNetworkConfig::new().with_latent_dim(d).with_hidden(h);
+            let model = perturbed(
+                SdfAutoDecoder::new(&config, 2, 5, &device).unwrap(),
+                9,
+                0.05,
+            );
+            let latent = model.latents_to_vec().swap_remove(1);
+            let host = SdfField::new(&model.network, &latent).unwrap();
+            assert!(host.uses_host_forward());
+            let tensor = host.clone().with_tensor_forward();
+            assert!(!tensor.uses_host_forward());
+            let pts = points(2100);
+            let (f1, g1) = field_values(&host, &pts);
+            let (f2, g2) = field_values(&tensor, &pts);
+            for i in 0..pts.len() {
+                assert!(
+                    (f1[i] - f2[i]).abs() <= 2e-6 * (1.0 + f2[i].abs()),
+                    "(d, H) = ({d}, {h}), f at {i}: host {} tensor {}",
+                    f1[i],
+                    f2[i]
+                );
+                for k in 0..3 {
+                    assert!(
+                        (g1[i][k] - g2[i][k]).abs() <= 1e-5 * (1.0 + g2[i][k].abs()),
+                        "(d, H) = ({d}, {h}), ∇f at {i}: {:?} vs {:?}",
+                        g1[i],
+                        g2[i]
+                    );
+                }
+            }
+            let mut only_f = vec![0.0; pts.len()];
+            host.eval_batch(&pts, &mut only_f, None);
+            assert_eq!(only_f, f1, "f does not depend on whether ∇f is asked");
+        }
     }
 
     #[test]

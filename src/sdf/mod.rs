@@ -6,6 +6,7 @@
 //! - [`loss`]: the IGR loss over a [`TrainingBatch`].
 //! - [`step`]: one Adam step ([`SdfTrainer`]).
 //! - [`field`]: fast evaluation of f and ∇f for one latent over many points.
+//! - `infer`: the inference-only host forward pass behind [`field`] (Flex backend).
 //! - [`data`], [`cache`], [`batch`]: training shapes, their one-off samples, reproducible batches.
 //! - [`config`], [`training`], [`manifest`], [`store`]: the training loop and saved models.
 //! - [`reconstruct`], [`evaluation`], [`generate`]: meshes, fidelity and new shapes from latents.
@@ -15,6 +16,8 @@
 pub mod backend;
 pub mod decoder;
 pub mod field;
+#[cfg(feature = "flex")]
+pub mod infer;
 pub mod loss;
 pub mod network;
 pub mod step;

@@ -228,8 +228,8 @@ mod tests {
                     fast.mesh.triangle_count() > 100,
                     "a real surface, not a speck"
                 );
-                // Blocks are 8 cells wide: at coarse grids the band |f| ≤ L·half-diagonal
-                // covers most of the cube, at finer grids culling pays.
+                // At coarse grids the band |f| ≤ L·half-diagonal covers much of the cube, at
+                // finer grids culling pays.
                 assert!(fast.evaluations.samples <= dense.evaluations.samples);
                 if resolution >= 96 {
                     assert!(fast.evaluations.samples < dense.evaluations.samples);
