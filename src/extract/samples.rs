@@ -68,7 +68,7 @@ impl Layout {
         let lo = block.map(|b| b as usize * span);
         let hi = lo.map(|l| (l + span).min(self.cells));
         let centre = lo.map(|l| l + span / 2);
-        if span % 2 == 0 && centre.iter().all(|&c| c <= self.cells) {
+        if span.is_multiple_of(2) && centre.iter().all(|&c| c <= self.cells) {
             let point = centre.map(|c| self.coords[c]);
             let radius = (0..3)
                 .map(|k| {

@@ -6,7 +6,7 @@
 #
 # Usage: tests/load/read_load.sh              (from the repository root)
 # Env:   LOAD_SECONDS (default 60), LOAD_CONNECTIONS (default 100), LOAD_THREADS (wrk, default 2),
-#        BURST (default 1000), LOAD_WORKERS (default 2)
+#        BURST (default 1000), LOAD_WORKERS (default 2), AORTAGEN_BIN (skip the build)
 set -euo pipefail
 
 ROOT="$(cd "$(dirname "$0")/../.." && pwd)"
@@ -23,8 +23,12 @@ if ! command -v wrk >/dev/null; then
     apt-get install -y wrk >/dev/null 2>&1 || sudo apt-get install -y wrk
 fi
 
-cargo build --release --locked --bin aortagen
-BIN="$CARGO_TARGET_DIR/release/aortagen"
+if [ -n "${AORTAGEN_BIN:-}" ]; then
+    BIN="$AORTAGEN_BIN" # an already built binary
+else
+    cargo build --release --locked --bin aortagen
+    BIN="$CARGO_TARGET_DIR/release/aortagen"
+fi
 
 WORK="$(mktemp -d)"
 PORT="$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')"
