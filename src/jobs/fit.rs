@@ -4,16 +4,15 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
 use super::engine::FitSpec;
-use super::{JobContext, RunOutcome, join_error, stop_outcome};
+use super::{JobContext, RunOutcome, run_with_progress, stop_outcome};
 use crate::db::{self, jobs::ClaimedJob};
-use crate::telemetry::spawn_blocking_with_span;
 
 /// The payload of a `fit` job.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -47,23 +46,11 @@ pub(super) async fn run(
     let engine = ctx.engine.clone();
     let model_dir = PathBuf::from(&model.dir_path);
     let (spec, task_flag) = (payload.spec.clone(), flag.clone());
-    let steps = Arc::new(AtomicU64::new(0));
-    let task_steps = steps.clone();
-    let mut task = spawn_blocking_with_span(move || {
-        engine.fit_anchor(&model_dir, &spec, &task_flag, &task_steps)
-    });
-    let mut reported = 0;
-    let mut tick = tokio::time::interval(PROGRESS_INTERVAL);
-    let joined = loop {
-        tokio::select! {
-            joined = &mut task => break joined,
-            _ = tick.tick() => {
-                reported = report_progress(ctx, job.job_id, &steps, reported).await?;
-            }
-        }
-    };
-    report_progress(ctx, job.job_id, &steps, reported).await?;
-    match joined.map_err(join_error).and_then(|r| r) {
+    let fitted = run_with_progress(ctx, job.job_id, PROGRESS_INTERVAL, move |steps| {
+        engine.fit_anchor(&model_dir, &spec, &task_flag, steps)
+    })
+    .await?;
+    match fitted {
         Ok(fitted) => {
             anyhow::ensure!(
                 fitted.chamfer.is_finite() && fitted.latent.iter().all(|v| v.is_finite()),
@@ -88,20 +75,6 @@ pub(super) async fn run(
             finish(ctx, anchor_id, outcome).await
         }
     }
-}
-
-async fn report_progress(
-    ctx: &JobContext,
-    job_id: i64,
-    steps: &AtomicU64,
-    reported: i64,
-) -> anyhow::Result<i64> {
-    let now = steps.load(Ordering::SeqCst) as i64;
-    if now != reported {
-        let mut conn = ctx.pool.acquire().await?;
-        db::jobs::set_progress(&mut conn, job_id, now).await?;
-    }
-    Ok(now)
 }
 
 /// Marks the anchor according to a run that did not succeed (a released job stays

@@ -1,6 +1,7 @@
 //! Background work: a durable queue in the `job` table, workers that claim and run jobs,
 //! and the job kinds (cohort generation, model training, fitting a new shape). Heavy work goes to
-//! `spawn_blocking`; a panic there fails the job, never the worker.
+//! background threads ([`priority::spawn_background`]); a panic there fails the job, never the
+//! worker.
 
 pub mod cohort;
 pub mod conditioned;
@@ -14,7 +15,7 @@ pub mod worker;
 
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -253,6 +254,51 @@ async fn stop_outcome(
         }));
     }
     Ok(None)
+}
+
+/// Runs `work` on a background engine thread with a progress counter, and copies the
+/// counter to the job row every `interval` while it runs and once at the end. The outer
+/// error is the job row's; the inner result is the engine's (a panic becomes an error).
+async fn run_with_progress<T, F>(
+    ctx: &JobContext,
+    job_id: i64,
+    interval: Duration,
+    work: F,
+) -> anyhow::Result<anyhow::Result<T>>
+where
+    F: FnOnce(&AtomicU64) -> anyhow::Result<T> + Send + 'static,
+    T: Send + 'static,
+{
+    let progress = Arc::new(AtomicU64::new(0));
+    let task_progress = progress.clone();
+    let mut task = priority::spawn_background(move || work(&task_progress));
+    let mut reported = 0;
+    let mut tick = tokio::time::interval(interval);
+    let joined = loop {
+        tokio::select! {
+            joined = &mut task => break joined,
+            _ = tick.tick() => {
+                reported = store_progress(ctx, job_id, &progress, reported).await?;
+            }
+        }
+    };
+    store_progress(ctx, job_id, &progress, reported).await?;
+    Ok(joined.map_err(join_error).and_then(|r| r))
+}
+
+/// Stores the counter when it changed since `reported`; returns what is stored.
+async fn store_progress(
+    ctx: &JobContext,
+    job_id: i64,
+    counter: &AtomicU64,
+    reported: i64,
+) -> anyhow::Result<i64> {
+    let now = counter.load(Ordering::SeqCst) as i64;
+    if now != reported {
+        let mut conn = ctx.pool.acquire().await?;
+        db::jobs::set_progress(&mut conn, job_id, now).await?;
+    }
+    Ok(now)
 }
 
 /// Turns a failed `spawn_blocking` (a panic inside the engine) into an error.

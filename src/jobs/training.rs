@@ -2,15 +2,14 @@
 //! `ready` with the engine's manifest, or `failed`.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
 use super::engine::TrainingSpec;
-use super::priority::spawn_background;
-use super::{JobContext, RunOutcome, join_error, stop_outcome};
+use super::{JobContext, RunOutcome, run_with_progress, stop_outcome};
 use crate::db::{self, jobs::ClaimedJob};
 
 /// The payload of a `training` job.
@@ -34,23 +33,12 @@ pub(super) async fn run(
     }
     let engine = ctx.engine.clone();
     let (spec, task_flag) = (payload.spec.clone(), flag.clone());
-    let saved = Arc::new(AtomicU64::new(0));
-    let task_saved = saved.clone();
-    let mut task = spawn_background(move || engine.train_model(&spec, &task_flag, &task_saved));
     // Saved epochs are the training job's progress: recovery after a killed process
     // compares them with the progress at the claim to tell a slow job from a stuck one.
-    let mut reported = 0;
-    let mut tick = tokio::time::interval(PROGRESS_INTERVAL);
-    let joined = loop {
-        tokio::select! {
-            joined = &mut task => break joined,
-            _ = tick.tick() => {
-                reported = report_progress(ctx, job.job_id, &saved, reported).await?;
-            }
-        }
-    };
-    report_progress(ctx, job.job_id, &saved, reported).await?;
-    let trained = joined.map_err(join_error).and_then(|r| r);
+    let trained = run_with_progress(ctx, job.job_id, PROGRESS_INTERVAL, move |saved| {
+        engine.train_model(&spec, &task_flag, saved)
+    })
+    .await?;
     match trained {
         Ok(info) => {
             let manifest = serde_json::to_value(&info)?;
@@ -70,21 +58,6 @@ pub(super) async fn run(
 
 /// How often the saved epochs of a running training are copied to the job row.
 const PROGRESS_INTERVAL: Duration = Duration::from_secs(1);
-
-/// Stores the saved epochs when they changed since `reported`; returns what is stored.
-async fn report_progress(
-    ctx: &JobContext,
-    job_id: i64,
-    saved: &AtomicU64,
-    reported: i64,
-) -> anyhow::Result<i64> {
-    let now = saved.load(Ordering::SeqCst) as i64;
-    if now != reported {
-        let mut conn = ctx.pool.acquire().await?;
-        db::jobs::set_progress(&mut conn, job_id, now).await?;
-    }
-    Ok(now)
-}
 
 /// Marks the model according to a run that did not succeed.
 async fn finish(
