@@ -6,18 +6,10 @@ use std::sync::atomic::Ordering;
 use aortagen::anatomy::shape::measure_shape;
 use aortagen::geometry::normalize::UnitBallTransform;
 use axum::http::StatusCode;
-use serde_json::{Value, json};
+use serde_json::json;
 
 use crate::engine::{CENTRE_MM, TRAINING_SHAPES, ellipsoid_unit, training_axes};
-use crate::helpers::{TestApp, cohort_body, spawn_app};
-
-fn body_with(extra: Value) -> Value {
-    let mut body = cohort_body(4, 2);
-    for (k, v) in extra.as_object().unwrap() {
-        body[k] = v.clone();
-    }
-    body
-}
+use crate::helpers::{cohort_body, cohort_body_with, spawn_app};
 
 /// Centreline lengths (mm) of the analytic training ellipsoids, measured as the service
 /// measures them.
@@ -36,20 +28,6 @@ fn training_lengths() -> Vec<f64> {
                 .length_mm
         })
         .collect()
-}
-
-async fn shapes(app: &TestApp, cohort: i64) -> Vec<Value> {
-    let page = app
-        .get(&format!("/v1/cohorts/{cohort}/shapes"))
-        .await
-        .json();
-    let mut out = Vec::new();
-    for item in page["items"].as_array().unwrap() {
-        let r = app.get(&format!("/v1/shapes/{}", item["id"])).await;
-        assert_eq!(r.status, StatusCode::OK);
-        out.push(r.json());
-    }
-    out
 }
 
 #[tokio::test]
@@ -104,7 +82,7 @@ async fn bad_targets_are_rejected_naming_the_field_and_rule() {
         ),
     ];
     for (extra, field, rule) in cases {
-        let r = app.create_cohort(&body_with(extra.clone())).await;
+        let r = app.create_cohort(&cohort_body_with(extra.clone())).await;
         assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY, "{extra}");
         assert_eq!(r.header("content-type"), Some("application/problem+json"));
         let p = r.json();
@@ -125,7 +103,7 @@ async fn an_impossible_target_is_refused_with_the_achievable_range() {
     let shortest = lengths.iter().cloned().fold(f64::INFINITY, f64::min);
     // Beyond the 5 % margin above the longest training shape.
     let min = (longest * 1.06).ceil();
-    let body = body_with(json!({ "targets": { "length_mm": { "min": min } } }));
+    let body = cohort_body_with(json!({ "targets": { "length_mm": { "min": min } } }));
     let r = app.create_cohort(&body).await;
     assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
     let p = r.json();
@@ -158,7 +136,7 @@ async fn a_feasible_target_is_met_by_every_shape_and_reported() {
     // The middle of the training range: plain draws of two shapes often miss it.
     let (lo, hi) = (lengths[1], lengths[3]);
     let targets = json!({ "length_mm": { "min": lo, "max": hi } });
-    let body = body_with(json!({ "count": 5, "targets": targets, "max_candidates": 20 }));
+    let body = cohort_body_with(json!({ "count": 5, "targets": targets, "max_candidates": 20 }));
     let id = app.create_cohort_ok(&body).await;
     app.run_pending_jobs().await;
     let c = app.get(&format!("/v1/cohorts/{id}")).await.json();
@@ -166,7 +144,7 @@ async fn a_feasible_target_is_met_by_every_shape_and_reported() {
     assert_eq!(c["targets"], targets);
     assert_eq!(c["max_candidates"], 20);
 
-    let shapes = shapes(&app, id).await;
+    let shapes = app.shape_details(id).await;
     let mut total = 0;
     let mut met = 0;
     for s in &shapes {
@@ -207,7 +185,7 @@ async fn a_feasible_target_is_met_by_every_shape_and_reported() {
     // The same request and seed give the same shapes, candidate for candidate.
     let again = app.create_cohort_ok(&body).await;
     app.run_pending_jobs().await;
-    let replay = crate::conditioned::shapes(&app, again).await;
+    let replay = app.shape_details(again).await;
     for (a, b) in shapes.iter().zip(&replay) {
         assert_eq!(
             a["provenance"]["training_indices"],
@@ -227,7 +205,7 @@ async fn an_unmet_target_is_searched_to_the_bound_and_the_closest_shape_is_flagg
     let longest = lengths.iter().cloned().fold(0.0, f64::max);
     // Inside the feasibility margin but beyond every mixture of the training shapes.
     let min = longest * 1.03;
-    let body = body_with(json!({
+    let body = cohort_body_with(json!({
         "count": 2,
         "resolution": 96,
         "targets": { "length_mm": { "min": min } },
@@ -245,7 +223,7 @@ async fn an_unmet_target_is_searched_to_the_bound_and_the_closest_shape_is_flagg
         (Some(6), Some(2)),
         "{c}"
     );
-    for s in shapes(&app, id).await {
+    for s in app.shape_details(id).await {
         let prov = &s["provenance"];
         assert_eq!(
             (prov["candidates"].as_i64(), prov["targets_met"].as_bool()),
@@ -284,7 +262,7 @@ async fn cohorts_without_targets_report_no_search() {
         ),
         (Some(0), Some(0))
     );
-    for s in shapes(&app, id).await {
+    for s in app.shape_details(id).await {
         assert!(s["provenance"]["candidates"].is_null(), "{s}");
         assert!(s["provenance"]["targets_met"].is_null(), "{s}");
     }

@@ -7,7 +7,18 @@ use axum::http::{Method, StatusCode};
 use serde_json::{Value, json};
 
 use crate::engine::{ellipsoid_unit, mixed_axes, uv_sphere};
-use crate::helpers::{MAX_UPLOAD, MODEL, TestApp, TestResponse, spawn_app};
+use crate::helpers::{MAX_UPLOAD, MODEL, TestApp, TestResponse, multipart, spawn_app};
+
+/// Starts training a model `id` of two spheres (a job left queued).
+async fn upload_two_spheres(app: &TestApp, id: &str) -> TestResponse {
+    let stl = write_mesh(&uv_sphere(6, 8), MeshFormat::Stl, &MeshMetadata::new("mm")).unwrap();
+    app.upload_model(&[
+        ("id", None, id.as_bytes().to_vec()),
+        ("files", Some("a.stl"), stl.clone()),
+        ("files", Some("b.stl"), stl),
+    ])
+    .await
+}
 
 /// Semi-axes (mm) of the uploaded ellipsoid, and where it is centred.
 const AXES: [f64; 3] = [13.0, 14.0, 34.5];
@@ -21,26 +32,6 @@ fn ellipsoid_stl(axes: [f64; 3]) -> Vec<u8> {
         }
     }
     write_mesh(&mesh, MeshFormat::Stl, &MeshMetadata::new("mm")).unwrap()
-}
-
-fn multipart(parts: &[(&str, Option<&str>, Vec<u8>)]) -> (String, Vec<u8>) {
-    let boundary = "aortagen-fit-boundary";
-    let mut body = Vec::new();
-    for (name, file, bytes) in parts {
-        body.extend_from_slice(
-            format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").as_bytes(),
-        );
-        if let Some(f) = file {
-            body.extend_from_slice(
-                format!("; filename=\"{f}\"\r\nContent-Type: application/octet-stream").as_bytes(),
-            );
-        }
-        body.extend_from_slice(b"\r\n\r\n");
-        body.extend_from_slice(bytes);
-        body.extend_from_slice(b"\r\n");
-    }
-    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
-    (format!("multipart/form-data; boundary={boundary}"), body)
 }
 
 async fn fit(app: &TestApp, model: &str, parts: &[(&str, Option<&str>, Vec<u8>)]) -> TestResponse {
@@ -312,20 +303,7 @@ async fn bad_fit_requests_are_refused_naming_the_field_and_rule() {
 #[tokio::test]
 async fn a_model_that_is_not_ready_cannot_be_fitted() {
     let app = spawn_app().await;
-    let stl = write_mesh(&uv_sphere(6, 8), MeshFormat::Stl, &MeshMetadata::new("mm")).unwrap();
-    let (content_type, body) = multipart(&[
-        ("id", None, b"young".to_vec()),
-        ("files", Some("a.stl"), stl.clone()),
-        ("files", Some("b.stl"), stl),
-    ]);
-    let r = app
-        .request(
-            Method::POST,
-            "/v1/models",
-            &[("content-type", &content_type)],
-            body,
-        )
-        .await;
+    let r = upload_two_spheres(&app, "young").await;
     assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
     let r = fit(
         &app,
@@ -439,20 +417,7 @@ async fn cohort_anchors_must_be_ready_distinct_and_of_the_same_model() {
     let ready = fitted_anchor(&app, MODEL, "ready").await;
     let second = fitted_anchor(&app, MODEL, "second").await;
     // A second model with an anchor of its own.
-    let stl = write_mesh(&uv_sphere(6, 8), MeshFormat::Stl, &MeshMetadata::new("mm")).unwrap();
-    let (content_type, body) = multipart(&[
-        ("id", None, b"other".to_vec()),
-        ("files", Some("a.stl"), stl.clone()),
-        ("files", Some("b.stl"), stl),
-    ]);
-    let r = app
-        .request(
-            Method::POST,
-            "/v1/models",
-            &[("content-type", &content_type)],
-            body,
-        )
-        .await;
+    let r = upload_two_spheres(&app, "other").await;
     assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
     app.run_pending_jobs().await;
     let foreign = fitted_anchor(&app, "other", "foreign").await;

@@ -202,6 +202,33 @@ impl TestApp {
         r.json()["id"].as_i64().unwrap()
     }
 
+    /// `POST /v1/models` with a multipart body of `parts`.
+    pub async fn upload_model(&self, parts: &[(&str, Option<&str>, Vec<u8>)]) -> TestResponse {
+        let (content_type, body) = multipart(parts);
+        self.request(
+            Method::POST,
+            "/v1/models",
+            &[("content-type", &content_type)],
+            body,
+        )
+        .await
+    }
+
+    /// Every shape of a cohort's first page, as `GET /v1/shapes/{id}` shows it.
+    pub async fn shape_details(&self, cohort: i64) -> Vec<Value> {
+        let page = self
+            .get(&format!("/v1/cohorts/{cohort}/shapes"))
+            .await
+            .json();
+        let mut out = Vec::new();
+        for item in page["items"].as_array().unwrap() {
+            let r = self.get(&format!("/v1/shapes/{}", item["id"])).await;
+            assert_eq!(r.status, StatusCode::OK);
+            out.push(r.json());
+        }
+        out
+    }
+
     /// Runs queued jobs until the queue is empty; returns what each run did.
     pub async fn run_pending_jobs(&self) -> Vec<ExecutionOutcome> {
         let mut outcomes = Vec::new();
@@ -226,4 +253,34 @@ impl TestApp {
 /// A cohort request on the analytic model.
 pub fn cohort_body(count: i64, arity: i64) -> Value {
     serde_json::json!({ "model_id": MODEL, "count": count, "arity": arity, "seed": 7, "resolution": 64 })
+}
+
+/// `cohort_body(4, 2)` with the fields of `extra` set on it.
+pub fn cohort_body_with(extra: Value) -> Value {
+    let mut body = cohort_body(4, 2);
+    for (k, v) in extra.as_object().unwrap() {
+        body[k] = v.clone();
+    }
+    body
+}
+
+/// A multipart/form-data body of `(field, file name, bytes)` parts, with its content type.
+pub fn multipart(parts: &[(&str, Option<&str>, Vec<u8>)]) -> (String, Vec<u8>) {
+    let boundary = "aortagen-test-boundary";
+    let mut body = Vec::new();
+    for (name, file, bytes) in parts {
+        body.extend_from_slice(
+            format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").as_bytes(),
+        );
+        if let Some(f) = file {
+            body.extend_from_slice(
+                format!("; filename=\"{f}\"\r\nContent-Type: application/octet-stream").as_bytes(),
+            );
+        }
+        body.extend_from_slice(b"\r\n\r\n");
+        body.extend_from_slice(bytes);
+        body.extend_from_slice(b"\r\n");
+    }
+    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
+    (format!("multipart/form-data; boundary={boundary}"), body)
 }

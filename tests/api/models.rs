@@ -47,40 +47,6 @@ async fn a_model_in_use_cannot_be_deleted_and_an_unused_one_can() {
     assert_eq!(app.get(&path).await.status, StatusCode::NOT_FOUND);
 }
 
-fn multipart(parts: &[(&str, Option<&str>, Vec<u8>)]) -> (String, Vec<u8>) {
-    let boundary = "aortagen-test-boundary";
-    let mut body = Vec::new();
-    for (name, file, bytes) in parts {
-        body.extend_from_slice(
-            format!("--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"").as_bytes(),
-        );
-        if let Some(f) = file {
-            body.extend_from_slice(
-                format!("; filename=\"{f}\"\r\nContent-Type: application/octet-stream").as_bytes(),
-            );
-        }
-        body.extend_from_slice(b"\r\n\r\n");
-        body.extend_from_slice(bytes);
-        body.extend_from_slice(b"\r\n");
-    }
-    body.extend_from_slice(format!("--{boundary}--\r\n").as_bytes());
-    (format!("multipart/form-data; boundary={boundary}"), body)
-}
-
-async fn upload(
-    app: &TestApp,
-    parts: &[(&str, Option<&str>, Vec<u8>)],
-) -> crate::helpers::TestResponse {
-    let (content_type, body) = multipart(parts);
-    app.request(
-        Method::POST,
-        "/v1/models",
-        &[("content-type", &content_type)],
-        body,
-    )
-    .await
-}
-
 fn stl() -> Vec<u8> {
     write_mesh(&uv_sphere(6, 8), MeshFormat::Stl, &MeshMetadata::new("mm")).unwrap()
 }
@@ -93,7 +59,7 @@ async fn uploaded_meshes_train_a_new_model_as_a_job() {
         ("files", Some("a.stl"), stl()),
         ("files", Some("b.stl"), stl()),
     ];
-    let r = upload(&app, &parts).await;
+    let r = app.upload_model(&parts).await;
     assert_eq!(
         r.status,
         StatusCode::ACCEPTED,
@@ -123,29 +89,25 @@ async fn uploaded_meshes_train_a_new_model_as_a_job() {
 #[tokio::test]
 async fn a_bad_upload_is_refused_naming_the_file_and_nothing_is_stored() {
     let app = spawn_app().await;
-    let broken = upload(
-        &app,
-        &[
+    let broken = app
+        .upload_model(&[
             ("files", Some("good.stl"), stl()),
             ("files", Some("broken.ply"), b"ply\nnonsense".to_vec()),
-        ],
-    )
-    .await;
+        ])
+        .await;
     assert_eq!(broken.status, StatusCode::UNPROCESSABLE_ENTITY);
     let p = broken.json();
     assert_eq!(p["field"], "files[broken.ply]");
     assert!(p["detail"].as_str().unwrap().contains("broken.ply"));
 
-    let big = upload(
-        &app,
-        &[
+    let big = app
+        .upload_model(&[
             ("files", Some("a.stl"), vec![0; MAX_UPLOAD + 1]),
             ("files", Some("b.stl"), stl()),
-        ],
-    )
-    .await;
+        ])
+        .await;
     assert_eq!(big.status, StatusCode::PAYLOAD_TOO_LARGE);
-    let one = upload(&app, &[("files", Some("a.stl"), stl())]).await;
+    let one = app.upload_model(&[("files", Some("a.stl"), stl())]).await;
     assert_eq!(
         (one.status, one.json()["field"].as_str()),
         (StatusCode::UNPROCESSABLE_ENTITY, Some("files"))
@@ -219,7 +181,7 @@ async fn a_zip_archive_of_meshes_trains_a_model() {
         ("files", Some("set.zip"), archive),
         ("files", Some("d.stl"), stl()),
     ];
-    let r = upload(&app, &parts).await;
+    let r = app.upload_model(&parts).await;
     assert_eq!(
         r.status,
         StatusCode::ACCEPTED,

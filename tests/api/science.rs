@@ -5,35 +5,13 @@ use axum::http::StatusCode;
 use serde_json::{Value, json};
 
 use crate::engine::{TRAINING_SHAPES, mixed_axes};
-use crate::helpers::{TestApp, cohort_body, spawn_app};
-
-fn body_with(extra: Value) -> Value {
-    let mut body = cohort_body(4, 2);
-    for (k, v) in extra.as_object().unwrap() {
-        body[k] = v.clone();
-    }
-    body
-}
-
-async fn shapes(app: &TestApp, cohort: i64) -> Vec<Value> {
-    let page = app
-        .get(&format!("/v1/cohorts/{cohort}/shapes"))
-        .await
-        .json();
-    let mut out = Vec::new();
-    for item in page["items"].as_array().unwrap() {
-        let r = app.get(&format!("/v1/shapes/{}", item["id"])).await;
-        assert_eq!(r.status, StatusCode::OK);
-        out.push(r.json());
-    }
-    out
-}
+use crate::helpers::{cohort_body, cohort_body_with, spawn_app};
 
 #[tokio::test]
 async fn a_cohort_with_latent_noise_and_spread_selection_succeeds_and_records_them() {
     let app = spawn_app().await;
     let plain = app.create_cohort_ok(&cohort_body(4, 2)).await;
-    let body = body_with(json!({ "latent_noise": 0.5, "selection": "spread" }));
+    let body = cohort_body_with(json!({ "latent_noise": 0.5, "selection": "spread" }));
     let r = app.create_cohort(&body).await;
     assert_eq!(r.status, StatusCode::ACCEPTED);
     assert_eq!(r.json()["latent_noise"], 0.5);
@@ -53,7 +31,7 @@ async fn a_cohort_with_latent_noise_and_spread_selection_succeeds_and_records_th
         (Some(0.0), Some("uniform"))
     );
 
-    let noisy = shapes(&app, id).await;
+    let noisy = app.shape_details(id).await;
     assert_eq!(noisy.len(), 4);
     for s in &noisy {
         let prov = &s["provenance"];
@@ -73,7 +51,7 @@ async fn a_cohort_with_latent_noise_and_spread_selection_succeeds_and_records_th
             "{s}"
         );
     }
-    for s in shapes(&app, plain).await {
+    for s in app.shape_details(plain).await {
         assert_eq!(
             (
                 s["provenance"]["latent_noise"].as_f64(),
@@ -93,7 +71,7 @@ async fn bad_diversity_and_novelty_values_are_rejected_naming_the_field() {
         (json!({ "min_novelty": -1e-3 }), "min_novelty"),
     ];
     for (extra, field) in cases {
-        let r = app.create_cohort(&body_with(extra.clone())).await;
+        let r = app.create_cohort(&cohort_body_with(extra.clone())).await;
         assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY, "{extra}");
         assert_eq!(
             r.header("content-type"),
@@ -110,7 +88,7 @@ async fn every_shape_reports_its_novelty_and_the_metrics_summarise_it() {
     let app = spawn_app().await;
     let id = app.create_cohort_ok(&cohort_body(5, 2)).await;
     app.run_pending_jobs().await;
-    let shapes = shapes(&app, id).await;
+    let shapes = app.shape_details(id).await;
     assert_eq!(shapes.len(), 5);
     let mut cds = Vec::new();
     for s in &shapes {
@@ -160,7 +138,7 @@ async fn every_shape_reports_its_novelty_and_the_metrics_summarise_it() {
 async fn an_unreachable_min_novelty_keeps_the_most_novel_draw_and_flags_it() {
     let app = spawn_app().await;
     let id = app
-        .create_cohort_ok(&body_with(json!({ "count": 2, "min_novelty": 1e6 })))
+        .create_cohort_ok(&cohort_body_with(json!({ "count": 2, "min_novelty": 1e6 })))
         .await;
     app.run_pending_jobs().await;
     let c = app.get(&format!("/v1/cohorts/{id}")).await.json();
@@ -169,7 +147,7 @@ async fn an_unreachable_min_novelty_keeps_the_most_novel_draw_and_flags_it() {
         (c["min_novelty"].as_f64(), c["redraws_total"].as_i64()),
         (Some(1e6), Some(20))
     );
-    for s in shapes(&app, id).await {
+    for s in app.shape_details(id).await {
         assert_eq!(
             (s["redraws"].as_i64(), s["novelty_met"].as_bool()),
             (Some(10), Some(false)),
@@ -193,10 +171,10 @@ async fn an_unreachable_min_novelty_keeps_the_most_novel_draw_and_flags_it() {
     );
 
     // A reachable minimum: every shape meets it, and a replay gives the same shapes.
-    let easy = body_with(json!({ "count": 3, "min_novelty": 0.0 }));
+    let easy = cohort_body_with(json!({ "count": 3, "min_novelty": 0.0 }));
     let a = app.create_cohort_ok(&easy).await;
     app.run_pending_jobs().await;
-    for s in shapes(&app, a).await {
+    for s in app.shape_details(a).await {
         assert_eq!(
             (s["redraws"].as_i64(), s["novelty_met"].as_bool()),
             (Some(0), Some(true)),
@@ -209,20 +187,22 @@ async fn an_unreachable_min_novelty_keeps_the_most_novel_draw_and_flags_it() {
 async fn the_most_novel_draw_is_the_one_kept() {
     let app = spawn_app().await;
     let id = app
-        .create_cohort_ok(&body_with(
+        .create_cohort_ok(&cohort_body_with(
             json!({ "count": 1, "min_novelty": 1e6, "weighting": "dirichlet" }),
         ))
         .await;
     app.run_pending_jobs().await;
-    let kept = &shapes(&app, id).await[0];
+    let kept = &app.shape_details(id).await[0];
     let kept_cd = kept["novelty_cd"].as_f64().unwrap();
     // Every draw of the same shape, replayed without a minimum from its recorded attempt seeds,
     // is no more novel than the kept one: compare against draws 0 (the plain cohort).
     let plain = app
-        .create_cohort_ok(&body_with(json!({ "count": 1, "weighting": "dirichlet" })))
+        .create_cohort_ok(&cohort_body_with(
+            json!({ "count": 1, "weighting": "dirichlet" }),
+        ))
         .await;
     app.run_pending_jobs().await;
-    let first = &shapes(&app, plain).await[0];
+    let first = &app.shape_details(plain).await[0];
     assert!(
         kept_cd >= first["novelty_cd"].as_f64().unwrap(),
         "{kept} vs {first}"
@@ -237,7 +217,7 @@ async fn every_shape_carries_its_anatomy_or_the_reason_and_the_metrics_summarise
     let mut lengths = Vec::new();
     let mut annuli = Vec::new();
     let mut failed = 0;
-    for s in shapes(&app, id).await {
+    for s in app.shape_details(id).await {
         match (&s["anatomy"], &s["anatomy_error"]) {
             (Value::Object(a), Value::Null) => {
                 let length = a["length_mm"].as_f64().unwrap();
