@@ -9,7 +9,7 @@
 //! of the network; the latent's share of layer 0 and of the skip layer is added as one
 //! precomputed row. Results agree with [`SdfNetwork::evaluate`] to float rounding.
 
-use std::f32::consts::{FRAC_1_SQRT_2, LOG2_E};
+use std::f32::consts::FRAC_1_SQRT_2;
 
 use burn::module::Module;
 use burn::tensor::{Tensor, TensorData};
@@ -17,6 +17,7 @@ use burn_flex::FlexTensor;
 use rayon::prelude::*;
 
 use super::network::{LatentOffsets, SdfNetwork};
+use super::softplus::{exp_neg, ln_1p_unit};
 
 /// Points per parallel chunk: the activations of a chunk stay in the outer caches.
 const CHUNK: usize = 2048;
@@ -281,41 +282,6 @@ fn softplus(y: &mut [f32], beta: f32, slopes: bool) -> Option<Vec<f32>> {
     }
 }
 
-/// e^(−a) for a ≥ 0 (0 below the smallest normal float), branch-free.
-#[inline(always)]
-fn exp_neg(a: f32) -> f32 {
-    let x = (-a).max(-87.0);
-    // Round x·log₂e to the nearest integer with the 1.5·2²³ trick (no rounding instruction
-    // needed), then e^x = 2ⁿ·e^r with |r| ≤ ln2/2.
-    const MAGIC: f32 = 12_582_912.0;
-    let n = (x * LOG2_E + MAGIC) - MAGIC;
-    let r = x - n * 0.693_145_75 - n * 1.428_606_8e-6;
-    let p = 1.0
-        + r * (1.0
-            + r * (0.5
-                + r * (1.0 / 6.0
-                    + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (1.0 / 720.0 + r / 5040.0))))));
-    let scale = f32::from_bits((((n as i32) + 127) as u32) << 23);
-    let e = p * scale;
-    if a > 87.0 { 0.0 } else { e }
-}
-
-/// ln(1 + e) for e ∈ [0, 1], as 2·atanh(s), s = e/(2+e) ≤ 1/3 (series to s¹⁹).
-#[inline(always)]
-fn ln_1p_unit(e: f32) -> f32 {
-    let s = e / (2.0 + e);
-    let s2 = s * s;
-    let series = 1.0
-        + s2 * (1.0 / 3.0
-            + s2 * (1.0 / 5.0
-                + s2 * (1.0 / 7.0
-                    + s2 * (1.0 / 9.0
-                        + s2 * (1.0 / 11.0
-                            + s2 * (1.0 / 13.0
-                                + s2 * (1.0 / 15.0 + s2 * (1.0 / 17.0 + s2 / 19.0))))))));
-    2.0 * s * series
-}
-
 /// Whether `network` can use [`HostForward`] (f32 parameters).
 pub fn supported(network: &SdfNetwork) -> bool {
     network.dtype() == burn::tensor::DType::F32
@@ -324,28 +290,6 @@ pub fn supported(network: &SdfNetwork) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::f32::consts::LN_2;
-
-    #[test]
-    fn exp_and_log1p_approximations_are_accurate() {
-        let mut a = 0.0f32;
-        while a < 100.0 {
-            let (ours, std) = (exp_neg(a), (-a).exp());
-            assert!(
-                (ours - std).abs() <= 4e-7 * std + 1e-37,
-                "exp(-{a}): {ours} vs {std}"
-            );
-            let e = (-a).exp();
-            let (ours, std) = (ln_1p_unit(e), e.ln_1p());
-            assert!(
-                (ours - std).abs() <= 4e-7 * std + 1e-38,
-                "ln1p({e}): {ours} vs {std}"
-            );
-            a += 0.0137;
-        }
-        assert_eq!(exp_neg(0.0), 1.0);
-        assert!((ln_1p_unit(1.0) - LN_2).abs() < 1e-7);
-    }
 
     #[test]
     fn softplus_matches_the_reference_formula() {

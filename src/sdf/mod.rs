@@ -2,6 +2,8 @@
 //!
 //! - [`backend`]: the only place a compute backend / device is chosen.
 //! - [`network`]: the DeepSDF/IGR MLP and its explicit input gradient ∇ₓf.
+//! - [`fused`], [`softplus`]: the fused softplus and reverse-pass gate of a hidden layer, with
+//!   their own backward (a burn backend extension over host loops).
 //! - [`decoder`]: network + per-shape latent table.
 //! - [`loss`]: the IGR loss over a [`TrainingBatch`].
 //! - [`step`]: one Adam step ([`SdfTrainer`]).
@@ -16,10 +18,12 @@
 pub mod backend;
 pub mod decoder;
 pub mod field;
+pub mod fused;
 #[cfg(feature = "flex")]
 pub mod infer;
 pub mod loss;
 pub mod network;
+pub mod softplus;
 pub mod step;
 
 pub use backend::{Backend, BackendError};

@@ -22,11 +22,12 @@ use std::f64::consts::{FRAC_1_SQRT_2, PI};
 use burn::config::Config;
 use burn::module::{Module, Param};
 use burn::nn::Linear;
-use burn::tensor::activation::{log_sigmoid, sigmoid};
 use burn::tensor::{DType, Device, Tensor, TensorData};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
+
+use super::fused::{gate, softplus_offset};
 
 /// Architecture and initialisation of the SDF network (defaults: the paper's configuration).
 #[derive(Config, Debug)]
@@ -207,24 +208,6 @@ pub struct SdfOutput {
     pub gradients: Option<Tensor<2>>,
 }
 
-/// Softplus_β(y) and its derivative σ(βy) from fused burn ops: with t = βy,
-/// softplus_β(y) = y − log σ(t)/β (`log_sigmoid` is one fused, overflow-safe op with its own
-/// backward) and σ(t) is the fused `sigmoid`.
-fn softplus_and_slope(y: Tensor<2>, beta: f64, need_slope: bool) -> (Tensor<2>, Option<Tensor<2>>) {
-    let t = y.clone().mul_scalar(beta);
-    let slope = need_slope.then(|| sigmoid(t.clone()));
-    (y - log_sigmoid(t).mul_scalar(1.0 / beta), slope)
-}
-
-/// Adds a per-shape row `[S, H]` to per-point rows `[S·P, H]` (points grouped by shape).
-fn add_per_shape(per_point: Tensor<2>, per_shape: &Tensor<2>) -> Tensor<2> {
-    let [rows, width] = per_point.dims();
-    let shapes = per_shape.dims()[0];
-    let points = rows / shapes;
-    (per_point.reshape([shapes, points, width]) + per_shape.clone().unsqueeze_dim::<3>(1))
-        .reshape([rows, width])
-}
-
 /// Directions for calibrating the initial output bias: a Fibonacci sphere (deterministic,
 /// near-uniform).
 const CALIBRATION_DIRECTIONS: usize = 256;
@@ -321,6 +304,10 @@ impl SdfNetwork {
 
     /// f (and ∇ₓf if `with_gradient`) at `points` `[S·P, 3]`, grouped by shape in the order of
     /// the offsets' rows (P points per shape).
+    ///
+    /// Each hidden layer is a matrix product followed by one fused `softplus_offset` (which
+    /// adds the bias, or the shape's latent offset); the reverse pass reuses the layers'
+    /// pre-activations through the fused `gate`.
     pub fn evaluate(
         &self,
         offsets: &LatentOffsets,
@@ -329,64 +316,92 @@ impl SdfNetwork {
     ) -> SdfOutput {
         let d = self.latent_dim;
         let last = self.layers.len() - 1;
-        let w0 = self.layers[0].weight.val();
-        let y = add_per_shape(
-            points.clone().matmul(w0.clone().narrow(0, d, 3)),
-            &offsets.first,
-        );
-        let (mut h, slope) = softplus_and_slope(y, self.beta, with_gradient);
-        let mut slopes: Vec<Tensor<2>> = slope.into_iter().collect();
+        let w0_x = self.layers[0].weight.val().narrow(0, d, 3);
+        let skip_weight = self.skip_weight();
+        // (pre-activation, offset) of every hidden layer, kept for the reverse pass.
+        let mut pre_activations = Vec::with_capacity(if with_gradient { last } else { 0 });
+        let mut layer = |pre: Tensor<2>, offset: Tensor<2>| {
+            let h = softplus_offset(pre.clone(), offset.clone(), self.beta);
+            if with_gradient {
+                pre_activations.push((pre, offset));
+            }
+            h
+        };
+        let mut h = layer(points.clone().matmul(w0_x.clone()), offsets.first.clone());
         for l in 1..last {
             let lin = &self.layers[l];
-            let y = if l == self.skip_layer {
-                let w = lin.weight.val();
+            let (pre, offset) = if l == self.skip_layer {
                 let c = self.activation_inputs(l);
-                let hx = h.matmul(w.clone().narrow(0, 0, c))
-                    + points.clone().matmul(w.narrow(0, c + d, 3));
-                add_per_shape(hx.mul_scalar(FRAC_1_SQRT_2), &offsets.skip)
+                let pre = h.matmul(skip_weight.clone().narrow(0, 0, c))
+                    + points
+                        .clone()
+                        .matmul(skip_weight.clone().narrow(0, c + d, 3));
+                (pre, offsets.skip.clone())
             } else {
-                lin.forward(h)
+                (h.matmul(lin.weight.val()), row_bias(lin))
             };
-            let (next, slope) = softplus_and_slope(y, self.beta, with_gradient);
-            h = next;
-            slopes.extend(slope);
+            h = layer(pre, offset);
         }
         let values = self.layers[last].forward(h);
-        let gradients = with_gradient.then(|| self.input_gradient(&w0, slopes));
+        let gradients =
+            with_gradient.then(|| self.input_gradient(&w0_x, &skip_weight, pre_activations));
         SdfOutput { values, gradients }
     }
 
-    /// The reverse pass δ_{l−1} = σ_{l−1} ⊙ (δ_l W_lᵀ) down to the x rows; `slopes[l]` = σ(βy_l).
-    fn input_gradient(&self, w0: &Tensor<2>, mut slopes: Vec<Tensor<2>>) -> Tensor<2> {
+    /// The skip layer's weights scaled by 1/√2 (the scale of the re-concatenated input),
+    /// so that no full-size activation has to be scaled.
+    fn skip_weight(&self) -> Tensor<2> {
+        self.layers[self.skip_layer]
+            .weight
+            .val()
+            .mul_scalar(FRAC_1_SQRT_2)
+    }
+
+    /// The reverse pass δ_{l−1} = σ_{l−1} ⊙ (δ_l W_lᵀ) down to the x rows, with σ_l = σ(βy_l)
+    /// evaluated inside the fused `gate` from the kept pre-activations.
+    fn input_gradient(
+        &self,
+        w0_x: &Tensor<2>,
+        skip_weight: &Tensor<2>,
+        mut pre_activations: Vec<(Tensor<2>, Tensor<2>)>,
+    ) -> Tensor<2> {
         let d = self.latent_dim;
         let last = self.layers.len() - 1;
         let w_out = self.layers[last].weight.val();
         let width = w_out.dims()[0];
-        let mut delta =
-            slopes.pop().expect("one slope per hidden layer") * w_out.reshape([1, width]);
+        let mut next = || pre_activations.pop().expect("one per hidden layer");
+        let (pre, offset) = next();
+        let mut delta = gate(w_out.reshape([1, width]), pre, offset, self.beta);
         let mut grad_x = None;
         for l in (1..last).rev() {
-            let w = self.layers[l].weight.val();
             let back = if l == self.skip_layer {
                 let c = self.activation_inputs(l);
-                let gx = delta
-                    .clone()
-                    .matmul(w.clone().narrow(0, c + d, 3).transpose());
-                grad_x = Some(gx.mul_scalar(FRAC_1_SQRT_2));
-                delta
-                    .matmul(w.narrow(0, 0, c).transpose())
-                    .mul_scalar(FRAC_1_SQRT_2)
+                let w = skip_weight.clone();
+                grad_x = Some(
+                    delta
+                        .clone()
+                        .matmul(w.clone().narrow(0, c + d, 3).transpose()),
+                );
+                delta.matmul(w.narrow(0, 0, c).transpose())
             } else {
-                delta.matmul(w.transpose())
+                delta.matmul(self.layers[l].weight.val().transpose())
             };
-            delta = back * slopes.pop().expect("one slope per hidden layer");
+            let (pre, offset) = next();
+            delta = gate(back, pre, offset, self.beta);
         }
-        let g0 = delta.matmul(w0.clone().narrow(0, d, 3).transpose());
+        let g0 = delta.matmul(w0_x.clone().transpose());
         match grad_x {
             Some(gx) => g0 + gx,
             None => g0,
         }
     }
+}
+
+/// A layer's bias as a `[1, H]` offset row.
+fn row_bias(layer: &Linear) -> Tensor<2> {
+    let bias = layer.bias.as_ref().expect("SDF layers have biases").val();
+    let width = bias.dims()[0];
+    bias.reshape([1, width])
 }
 
 /// Helpers shared by the SDF tests: random perturbations and host conversions.
