@@ -17,7 +17,7 @@ use burn_flex::FlexTensor;
 use rayon::prelude::*;
 
 use super::network::{LatentOffsets, SdfNetwork};
-use super::softplus::{exp_neg, ln_1p_unit};
+use super::softplus::HostFloat;
 
 /// Points per parallel chunk: the activations of a chunk stay in the outer caches.
 const CHUNK: usize = 2048;
@@ -265,18 +265,14 @@ fn softplus(y: &mut [f32], beta: f32, slopes: bool) -> Option<Vec<f32>> {
     if slopes {
         let mut s = vec![0.0f32; y.len()];
         for (v, s) in y.iter_mut().zip(s.iter_mut()) {
-            let t = beta * *v;
-            let e = exp_neg(t.abs());
-            let inv = 1.0 / (1.0 + e);
-            *s = if t >= 0.0 { inv } else { e * inv };
-            *v = (t.max(0.0) + ln_1p_unit(e)) * inv_beta;
+            let (softplus, slope) = f32::softplus_unit(beta * *v);
+            *s = slope;
+            *v = softplus * inv_beta;
         }
         Some(s)
     } else {
         for v in y.iter_mut() {
-            let t = beta * *v;
-            let e = exp_neg(t.abs());
-            *v = (t.max(0.0) + ln_1p_unit(e)) * inv_beta;
+            *v = f32::softplus_unit(beta * *v).0 * inv_beta;
         }
         None
     }

@@ -177,10 +177,13 @@ fn for_blocks<E: Send, R: Send>(
 }
 
 /// Sums per-block `[groups·width]` partials in block order.
-fn sum_partials<E: HostFloat>(partials: Vec<Vec<E>>, len: usize) -> Vec<E> {
+fn sum_partials<'a, E: HostFloat>(
+    partials: impl IntoIterator<Item = &'a [E]>,
+    len: usize,
+) -> Vec<E> {
     let mut total = vec![E::ZERO; len];
     for p in partials {
-        total.iter_mut().zip(p).for_each(|(t, v)| *t += v);
+        total.iter_mut().zip(p).for_each(|(t, &v)| *t += v);
     }
     total
 }
@@ -238,7 +241,10 @@ pub fn softplus_backward<E: HostFloat>(
         }
         partial
     });
-    (grad_pre, sum_partials(partials, offset.len()))
+    (
+        grad_pre,
+        sum_partials(partials.iter().map(Vec::as_slice), offset.len()),
+    )
 }
 
 /// u ⊙ σ(β(pre + offset)): one step of the reverse pass for ∇ₓf. `u` has one row per row of
@@ -299,67 +305,33 @@ pub fn gate_backward<E: HostFloat>(
     let b = E::of(beta);
     let w = layout.width;
     let mut grad_pre = vec![E::ZERO; pre.len()];
-    let mut grad_u = if broadcast {
-        Vec::new()
-    } else {
-        vec![E::ZERO; pre.len()]
-    };
     let block_len = BLOCK_ROWS * w;
-    // Per block: the partial offset gradient and, for a broadcast u, the partial ∂u.
-    let partials: Vec<(Vec<E>, Vec<E>)> = if broadcast {
-        grad_pre
-            .par_chunks_mut(block_len)
-            .enumerate()
-            .map(|(b_idx, block)| {
-                let mut du = vec![E::ZERO; w];
-                let off = gate_block(
-                    grad,
-                    u,
-                    pre,
-                    offset,
-                    layout,
-                    b,
-                    b_idx * BLOCK_ROWS,
-                    block,
-                    GateU::Broadcast(&mut du),
-                );
-                (off, du)
-            })
-            .collect()
+    // ∂u storage per block: its rows of ∂u, or for a broadcast u one partial row per block
+    // (summed in block order below).
+    let (mut du_store, du_len) = if broadcast {
+        (vec![E::ZERO; pre.len().div_ceil(block_len) * w], w)
     } else {
-        grad_pre
-            .par_chunks_mut(block_len)
-            .zip(grad_u.par_chunks_mut(block_len))
-            .enumerate()
-            .map(|(b_idx, (block, du))| {
-                let off = gate_block(
-                    grad,
-                    u,
-                    pre,
-                    offset,
-                    layout,
-                    b,
-                    b_idx * BLOCK_ROWS,
-                    block,
-                    GateU::PerRow(du),
-                );
-                (off, Vec::new())
-            })
-            .collect()
+        (vec![E::ZERO; pre.len()], block_len)
     };
-    let (offsets, us): (Vec<_>, Vec<_>) = partials.into_iter().unzip();
-    if broadcast {
-        grad_u = sum_partials(us, w);
-    }
-    (grad_u, grad_pre, sum_partials(offsets, offset.len()))
-}
-
-/// Where a block of [`gate_backward`] writes ∂u.
-enum GateU<'a, E> {
-    /// Summed over rows (broadcast u).
-    Broadcast(&'a mut [E]),
-    /// One row per row (the block's rows).
-    PerRow(&'a mut [E]),
+    let offset_partials: Vec<Vec<E>> = grad_pre
+        .par_chunks_mut(block_len)
+        .zip(du_store.par_chunks_mut(du_len))
+        .enumerate()
+        .map(|(b_idx, (block, du))| {
+            let first = b_idx * BLOCK_ROWS;
+            gate_block(grad, u, pre, offset, layout, b, first, block, du, broadcast)
+        })
+        .collect();
+    let grad_u = if broadcast {
+        sum_partials(du_store.chunks(w), w)
+    } else {
+        du_store
+    };
+    (
+        grad_u,
+        grad_pre,
+        sum_partials(offset_partials.iter().map(Vec::as_slice), offset.len()),
+    )
 }
 
 /// One block of [`gate_backward`]; returns its partial offset gradient.
@@ -373,7 +345,8 @@ fn gate_block<E: HostFloat>(
     beta: E,
     first: usize,
     block: &mut [E],
-    mut du: GateU<'_, E>,
+    du: &mut [E],
+    broadcast: bool,
 ) -> Vec<E> {
     let w = layout.width;
     let mut partial = vec![E::ZERO; offset.len()];
@@ -384,9 +357,10 @@ fn gate_block<E: HostFloat>(
         let acc = &mut partial[g0..g0 + w];
         let (p, g) = (&pre[r * w..(r + 1) * w], &grad[r * w..(r + 1) * w]);
         // ∂u accumulates: over all rows for a broadcast u, once into a zeroed row otherwise.
-        let (u, du) = match &mut du {
-            GateU::Broadcast(du) => (u, &mut du[..]),
-            GateU::PerRow(du) => (&u[r * w..(r + 1) * w], &mut du[i * w..(i + 1) * w]),
+        let (u, du) = if broadcast {
+            (u, &mut du[..])
+        } else {
+            (&u[r * w..(r + 1) * w], &mut du[i * w..(i + 1) * w])
         };
         for (((((o, &p), &c), &g), a), (&u, d)) in row
             .iter_mut()
