@@ -9,8 +9,10 @@
 //!    several finest block sizes (deterministic);
 //! 4. `network`: the sparse path on a neural field, one run per resolution. Options:
 //!    `--net d,H` (geometric init, seed 1; repeatable) or `--model DIR` (first latent of a
-//!    saved model), `--resolution R` (repeatable; default 128 and 256), `--block B`,
-//!    `--tensor-forward` (burn's tensor forward pass instead of the host pass).
+//!    saved model; `--shape K`, repeatable, picks other latents), `--resolution R` (repeatable;
+//!    default 128 and 256), `--block B`, `--tensor-forward` (burn's tensor forward pass instead
+//!    of the host pass), `--compare-dense` (also run the dense reference path and print the
+//!    triangle counts of both meshes and their largest vertex difference).
 //!
 //! All sections run when no section is named (`network` only with `--net`/`--model`).
 
@@ -139,6 +141,7 @@ fn hierarchy_counts() {
 fn neural_fields(
     nets: &[(usize, usize)],
     models: &[String],
+    shapes: &[usize],
     tensor_forward: bool,
 ) -> Vec<(String, SdfField)> {
     let mut out = Vec::new();
@@ -155,11 +158,16 @@ fn neural_fields(
     for dir in models {
         let model =
             LoadedModel::load(std::path::Path::new(dir), Backend::default()).expect("model loads");
-        let latent = model.latents().swap_remove(0);
-        out.push((
-            format!("model {dir} shape 0"),
-            model.field(&latent).expect("latent fits"),
-        ));
+        let latents = model.latents();
+        for &k in shapes {
+            let latent = latents
+                .get(k)
+                .expect("--shape within the model's training shapes");
+            out.push((
+                format!("model {dir} shape {k}"),
+                model.field(latent).expect("latent fits"),
+            ));
+        }
     }
     if tensor_forward {
         out = out
@@ -173,11 +181,13 @@ fn neural_fields(
 fn network_extraction(
     nets: &[(usize, usize)],
     models: &[String],
+    shapes: &[usize],
     resolutions: &[usize],
     block: usize,
     tensor_forward: bool,
+    compare_dense: bool,
 ) {
-    for (label, field) in neural_fields(nets, models, tensor_forward) {
+    for (label, field) in neural_fields(nets, models, shapes, tensor_forward) {
         let neural = NeuralField::new(&field).expect("finite field");
         let options = ExtractOptions {
             block_cells: block,
@@ -197,6 +207,23 @@ fn network_extraction(
                 out.evaluations.total() as f64 / out.timings.evaluation.as_secs_f64(),
                 neural.lipschitz_bound()
             );
+            if compare_dense {
+                let start = Instant::now();
+                let dense = extract_dense(&neural, resolution, &options).expect("valid options");
+                let t = start.elapsed();
+                let difference = out.mesh.max_surface_difference(&dense.mesh);
+                println!(
+                    "  dense path: {:.0} ms, {} evaluations; triangles fast {} / dense {}; \
+                     vertices fast {} / dense {}; largest vertex difference {}",
+                    ms(t),
+                    dense.evaluations.total(),
+                    out.mesh.triangle_count(),
+                    dense.mesh.triangle_count(),
+                    out.mesh.vertex_count(),
+                    dense.mesh.vertex_count(),
+                    difference.map_or("— (counts differ)".to_owned(), |d| format!("{d:.2e}")),
+                );
+            }
         }
     }
 }
@@ -206,7 +233,8 @@ fn main() {
     let mut filters: Vec<String> = Vec::new();
     let (mut nets, mut models, mut resolutions, mut block) =
         (Vec::new(), Vec::new(), Vec::new(), 2);
-    let mut tensor_forward = false;
+    let mut shapes = Vec::new();
+    let (mut tensor_forward, mut compare_dense) = (false, false);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut value = || args.next().unwrap_or_else(|| panic!("{a} needs a value"));
@@ -219,13 +247,18 @@ fn main() {
             "--model" => models.push(value()),
             "--resolution" => resolutions.push(value().parse().expect("--resolution R")),
             "--block" => block = value().parse().expect("--block B"),
+            "--shape" => shapes.push(value().parse().expect("--shape K")),
             "--tensor-forward" => tensor_forward = true,
+            "--compare-dense" => compare_dense = true,
             other if other.starts_with("--") => {} // cargo bench passes --bench
             other => filters.push(other.to_owned()),
         }
     }
     if resolutions.is_empty() {
         resolutions = vec![128, 256];
+    }
+    if shapes.is_empty() {
+        shapes.push(0);
     }
     let wanted =
         |name: &str| filters.is_empty() || filters.iter().any(|f| name.contains(f.as_str()));
@@ -240,6 +273,14 @@ fn main() {
         hierarchy_counts();
     }
     if wanted("network") && !(nets.is_empty() && models.is_empty()) {
-        network_extraction(&nets, &models, &resolutions, block, tensor_forward);
+        network_extraction(
+            &nets,
+            &models,
+            &shapes,
+            &resolutions,
+            block,
+            tensor_forward,
+            compare_dense,
+        );
     }
 }
