@@ -1,14 +1,19 @@
-//! `GET /v1/jobs/{id}`: the state of background work.
+//! `GET /v1/jobs/{id}`: the state of background work; `POST /v1/jobs/{id}/cancel` stops it.
 
 use axum::Json;
 use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use axum::response::IntoResponse;
 use serde::Serialize;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extract::parse_id;
-use crate::db::{self, jobs::JobRow};
+use crate::db::{
+    self,
+    jobs::{CancelOutcome, JobRow},
+};
 
 /// A job as the API shows it.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
@@ -77,7 +82,9 @@ impl From<JobRow> for JobView {
 }
 
 pub(super) fn router() -> OpenApiRouter<AppState> {
-    OpenApiRouter::new().routes(routes!(get_job))
+    OpenApiRouter::new()
+        .routes(routes!(get_job))
+        .routes(routes!(cancel_job))
 }
 
 /// One job: kind, state, progress, timings, error text when failed.
@@ -91,4 +98,58 @@ async fn get_job(State(state): State<AppState>, Path(id): Path<String>) -> Resul
         .await?
         .ok_or_else(|| ApiError::not_found("job", &id))?;
     Ok(Json(job.into()))
+}
+
+/// Stops a job of any kind: a queued one at once, a running one at its next check (within
+/// seconds). What it worked on ends as when the job is interrupted: a cohort keeps its finished
+/// shapes, a model being trained and an anchor being fitted become `failed` ("cancelled").
+#[utoipa::path(post, path = "/v1/jobs/{id}/cancel", tag = "jobs",
+    params(("id" = i64, Path, description = "Job id")),
+    responses((status = 202, body = JobView, description = "Cancelled or cancellation under way"),
+              (status = 404, body = Problem, content_type = "application/problem+json"),
+              (status = 409, body = Problem, content_type = "application/problem+json", description = "Already finished")))]
+async fn cancel_job(
+    State(state): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<impl IntoResponse> {
+    let job_id = parse_id("job", &id)?;
+    let job = db::jobs::get(&state.pool, job_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("job", &id))?;
+    match db::jobs::request_cancel(&state.pool, job_id).await? {
+        CancelOutcome::AlreadyFinished => {
+            return Err(ApiError::Conflict(format!(
+                "job {id} has already {}",
+                job.status
+            )));
+        }
+        CancelOutcome::Requested => {
+            state.jobs.controls.interrupt(job_id);
+        }
+        CancelOutcome::CancelledWhileQueued => mark_subject_cancelled(&state, &job).await?,
+    }
+    let job = db::jobs::get(&state.pool, job_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("job", &id))?;
+    Ok((StatusCode::ACCEPTED, Json(JobView::from(job))))
+}
+
+/// A job cancelled before any worker claimed it never runs its own failure path, so the model
+/// or anchor it was to produce is marked here. A cohort's state follows its job's.
+async fn mark_subject_cancelled(state: &AppState, job: &JobRow) -> Result<()> {
+    let payload: serde_json::Value = serde_json::from_str(&job.payload).unwrap_or_default();
+    match job.kind.as_str() {
+        "fit" => {
+            if let Some(anchor_id) = payload.get("anchor_id").and_then(|a| a.as_i64()) {
+                db::anchors::set_failed(&state.pool, anchor_id, "cancelled").await?;
+            }
+        }
+        "training" => {
+            if let Some(model_id) = payload.get("model_id").and_then(|m| m.as_str()) {
+                db::models::set_trained(&state.pool, model_id, "failed", None).await?;
+            }
+        }
+        _ => {}
+    }
+    Ok(())
 }

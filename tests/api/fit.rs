@@ -58,6 +58,10 @@ async fn fitted_anchor(app: &TestApp, model: &str, name: &str) -> i64 {
     r.json()["anchor_id"].as_i64().unwrap()
 }
 
+async fn cancel(app: &TestApp, path: &str) -> TestResponse {
+    app.request(Method::POST, path, &[], "").await
+}
+
 fn text(r: &TestResponse) -> String {
     String::from_utf8_lossy(&r.body).into_owned()
 }
@@ -313,6 +317,59 @@ async fn a_model_that_is_not_ready_cannot_be_fitted() {
     .await;
     assert_eq!(r.status, StatusCode::CONFLICT, "{}", text(&r));
     assert!(r.json()["detail"].as_str().unwrap().contains("training"));
+}
+
+#[tokio::test]
+async fn queued_fit_and_training_jobs_are_cancelled_and_their_subjects_marked_failed() {
+    let app = spawn_app().await;
+    let r = fit(&app, MODEL, &[("file", Some("p.stl"), ellipsoid_stl(AXES))]).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
+    let (anchor, fit_job) = (
+        r.json()["anchor_id"].as_i64().unwrap(),
+        r.json()["job_id"].as_i64().unwrap(),
+    );
+    let r = upload_two_spheres(&app, "young").await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
+    let training_job = r.json()["job_id"].as_i64().unwrap();
+
+    for job in [fit_job, training_job] {
+        let r = cancel(&app, &format!("/v1/jobs/{job}/cancel")).await;
+        assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
+        assert_eq!(
+            (
+                r.json()["status"].as_str(),
+                r.json()["cancel_requested"].as_bool()
+            ),
+            (Some("cancelled"), Some(true))
+        );
+    }
+    // Nothing is left for a worker, and what the jobs were to produce is marked.
+    assert!(app.run_pending_jobs().await.is_empty());
+    let a = app.get(&format!("/v1/anchors/{anchor}")).await.json();
+    assert_eq!(
+        (a["status"].as_str(), a["error"].as_str()),
+        (Some("failed"), Some("cancelled"))
+    );
+    let m = app.get("/v1/models/young").await.json();
+    assert_eq!(m["status"], "failed");
+    // A cancelled anchor is not fitting any more, so it can be deleted.
+    let r = app
+        .request(Method::DELETE, &format!("/v1/anchors/{anchor}"), &[], "")
+        .await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT, "{}", text(&r));
+
+    let again = cancel(&app, &format!("/v1/jobs/{fit_job}/cancel")).await;
+    assert_eq!(again.status, StatusCode::CONFLICT, "{}", text(&again));
+    assert!(
+        again.json()["detail"]
+            .as_str()
+            .unwrap()
+            .contains("cancelled")
+    );
+    for unknown in ["/v1/jobs/999/cancel", "/v1/jobs/abc/cancel"] {
+        let r = cancel(&app, unknown).await;
+        assert_eq!(r.status, StatusCode::NOT_FOUND, "{unknown}: {}", text(&r));
+    }
 }
 
 #[tokio::test]

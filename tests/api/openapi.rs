@@ -45,6 +45,7 @@ async fn the_served_document_lists_every_contract_path() {
         ("/v1/shapes/{id}", "get"),
         ("/v1/shapes/{id}/mesh", "get"),
         ("/v1/jobs/{id}", "get"),
+        ("/v1/jobs/{id}/cancel", "post"),
     ];
     for (path, method) in contract {
         assert!(
