@@ -116,22 +116,34 @@ async fn cancel_job(
     let job = db::jobs::get(&state.pool, job_id)
         .await?
         .ok_or_else(|| ApiError::not_found("job", &id))?;
-    match db::jobs::request_cancel(&state.pool, job_id).await? {
-        CancelOutcome::AlreadyFinished => {
-            return Err(ApiError::Conflict(format!(
-                "job {id} has already {}",
-                job.status
-            )));
-        }
-        CancelOutcome::Requested => {
-            state.jobs.controls.interrupt(job_id);
-        }
-        CancelOutcome::CancelledWhileQueued => mark_subject_cancelled(&state, &job).await?,
+    if stop_job(&state, job_id).await? == CancelOutcome::AlreadyFinished {
+        return Err(ApiError::Conflict(format!(
+            "job {id} has already {}",
+            job.status
+        )));
     }
     let job = db::jobs::get(&state.pool, job_id)
         .await?
         .ok_or_else(|| ApiError::not_found("job", &id))?;
     Ok((StatusCode::ACCEPTED, Json(JobView::from(job))))
+}
+
+/// Asks a job to stop: a queued one is cancelled at once, a running one is flagged and its
+/// worker interrupted (it stops at its next check).
+pub(super) async fn stop_job(state: &AppState, job_id: i64) -> Result<CancelOutcome> {
+    let outcome = db::jobs::request_cancel(&state.pool, job_id).await?;
+    match outcome {
+        CancelOutcome::Requested => {
+            state.jobs.controls.interrupt(job_id);
+        }
+        CancelOutcome::CancelledWhileQueued => {
+            if let Some(job) = db::jobs::get(&state.pool, job_id).await? {
+                mark_subject_cancelled(state, &job).await?;
+            }
+        }
+        CancelOutcome::AlreadyFinished => {}
+    }
+    Ok(outcome)
 }
 
 /// A job cancelled before any worker claimed it never runs its own failure path, so the model

@@ -13,6 +13,7 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extract::{ApiJson, ApiQuery, parse_id};
+use super::jobs::stop_job;
 use crate::anatomy::targets::{DEFAULT_MAX_CANDIDATES, check_feasible};
 use crate::db::{self, cohorts::CohortRow, jobs::CancelOutcome};
 use crate::jobs::cohort::CohortPayload;
@@ -278,17 +279,11 @@ async fn cancel_cohort(
     Path(id): Path<String>,
 ) -> Result<impl IntoResponse> {
     let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
-    match db::jobs::request_cancel(&state.pool, cohort.job_id).await? {
-        CancelOutcome::AlreadyFinished => {
-            return Err(ApiError::Conflict(format!(
-                "cohort {id} has already {}",
-                cohort.status
-            )));
-        }
-        CancelOutcome::Requested => {
-            state.jobs.controls.interrupt(cohort.job_id);
-        }
-        CancelOutcome::CancelledWhileQueued => {}
+    if stop_job(&state, cohort.job_id).await? == CancelOutcome::AlreadyFinished {
+        return Err(ApiError::Conflict(format!(
+            "cohort {id} has already {}",
+            cohort.status
+        )));
     }
     let cohort = load(&state, cohort.cohort_id, &id).await?;
     Ok((StatusCode::ACCEPTED, Json(CohortView::from_row(cohort))))
@@ -310,8 +305,7 @@ async fn delete_cohort(
         return Err(ApiError::Conflict(msg));
     }
     // A queued cohort is cancelled first so no worker claims it while it is deleted.
-    if db::jobs::request_cancel(&state.pool, cohort.job_id).await? == CancelOutcome::Requested {
-        state.jobs.controls.interrupt(cohort.job_id);
+    if stop_job(&state, cohort.job_id).await? == CancelOutcome::Requested {
         let msg =
             format!("cohort {id} started running; it is being cancelled, delete it afterwards");
         return Err(ApiError::Conflict(msg));
