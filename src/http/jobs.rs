@@ -14,6 +14,7 @@ use crate::db::{
     self,
     jobs::{CancelOutcome, JobRow},
 };
+use crate::jobs;
 
 /// A job as the API shows it.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
@@ -138,30 +139,10 @@ pub(super) async fn stop_job(state: &AppState, job_id: i64) -> Result<CancelOutc
         }
         CancelOutcome::CancelledWhileQueued => {
             if let Some(job) = db::jobs::get(&state.pool, job_id).await? {
-                mark_subject_cancelled(state, &job).await?;
+                jobs::finish_cancelled_while_queued(&state.jobs, &job.kind, &job.payload).await?;
             }
         }
         CancelOutcome::AlreadyFinished => {}
     }
     Ok(outcome)
-}
-
-/// A job cancelled before any worker claimed it never runs its own failure path, so the model
-/// or anchor it was to produce is marked here. A cohort's state follows its job's.
-async fn mark_subject_cancelled(state: &AppState, job: &JobRow) -> Result<()> {
-    let payload: serde_json::Value = serde_json::from_str(&job.payload).unwrap_or_default();
-    match job.kind.as_str() {
-        "fit" => {
-            if let Some(anchor_id) = payload.get("anchor_id").and_then(|a| a.as_i64()) {
-                db::anchors::set_failed(&state.pool, anchor_id, "cancelled").await?;
-            }
-        }
-        "training" => {
-            if let Some(model_id) = payload.get("model_id").and_then(|m| m.as_str()) {
-                db::models::set_trained(&state.pool, model_id, "failed", None).await?;
-            }
-        }
-        _ => {}
-    }
-    Ok(())
 }

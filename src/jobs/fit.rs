@@ -77,6 +77,13 @@ pub(super) async fn run(
     }
 }
 
+/// Marks the anchor of a job cancelled before it ran.
+pub(super) async fn finish_cancelled(ctx: &JobContext, payload: &str) -> anyhow::Result<()> {
+    let payload: FitPayload = serde_json::from_str(payload).context("bad job payload")?;
+    finish(ctx, payload.anchor_id, RunOutcome::Cancelled).await?;
+    Ok(())
+}
+
 /// Marks the anchor according to a run that did not succeed (a released job stays
 /// `fitting` and runs again).
 async fn finish(

@@ -151,6 +151,21 @@ pub async fn try_execute_job(ctx: &JobContext) -> anyhow::Result<ExecutionOutcom
     execute(ctx, job).instrument(span).await
 }
 
+/// Ends what a job cancelled while still queued was to produce, as its own run ends it on a
+/// cancel: no worker ever claims such a job, so its kind's `finish` runs here. A cohort's state
+/// follows its job's and needs nothing.
+pub async fn finish_cancelled_while_queued(
+    ctx: &JobContext,
+    kind: &str,
+    payload: &str,
+) -> anyhow::Result<()> {
+    match kind {
+        "training" => training::finish_cancelled(ctx, payload).await,
+        "fit" => fit::finish_cancelled(ctx, payload).await,
+        _ => Ok(()),
+    }
+}
+
 async fn execute(ctx: &JobContext, job: db::jobs::ClaimedJob) -> anyhow::Result<ExecutionOutcome> {
     tracing::info!("job started");
     let flag = ctx.controls.register(job.job_id);

@@ -59,6 +59,13 @@ pub(super) async fn run(
 /// How often the saved epochs of a running training are copied to the job row.
 const PROGRESS_INTERVAL: Duration = Duration::from_secs(1);
 
+/// Marks the model of a job cancelled before it ran.
+pub(super) async fn finish_cancelled(ctx: &JobContext, payload: &str) -> anyhow::Result<()> {
+    let payload: TrainingPayload = serde_json::from_str(payload).context("bad job payload")?;
+    finish(ctx, &payload.model_id, RunOutcome::Cancelled).await?;
+    Ok(())
+}
+
 /// Marks the model according to a run that did not succeed.
 async fn finish(
     ctx: &JobContext,
