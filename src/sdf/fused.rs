@@ -196,6 +196,11 @@ fn dims2<T: TensorMetadata>(t: &T) -> [usize; 2] {
 
 /// The fused host loops behind the backend implementations: which operation, on which
 /// inputs (always ending with `pre, offset`), with which output shapes.
+///
+/// The backward operations write their activation-sized results over their output gradient
+/// (and the gate's over `u`, which only its backward still holds), so a backward step
+/// allocates no new activation-sized buffer; burn hands both over uniquely owned, and a
+/// shared one is copied first.
 mod host {
     use super::super::softplus::{self, HostFloat, RowGroups};
 
@@ -204,12 +209,41 @@ mod host {
     pub enum Op {
         /// `[pre, offset]` → `[a]`.
         Softplus,
-        /// `[grad, pre, offset]` → `[∂pre, ∂offset]`.
+        /// `[grad, pre, offset]` → `[∂pre (over grad), ∂offset]`.
         SoftplusBackward,
         /// `[u, pre, offset]` → `[δ]`.
         Gate,
-        /// `[grad, u, pre, offset]` → `[∂u, ∂pre, ∂offset]`.
+        /// `[grad, u, pre, offset]` → `[∂u (over u), ∂pre (over grad), ∂offset]`.
         GateBackward,
+    }
+
+    impl Op {
+        /// How many leading inputs the operation overwrites with results.
+        pub fn written_inputs(self) -> usize {
+            match self {
+                Op::Softplus | Op::Gate => 0,
+                Op::SoftplusBackward => 1,
+                Op::GateBackward => 2,
+            }
+        }
+
+        /// The outputs in order, from the overwritten inputs and the new buffers.
+        pub fn assemble<T>(self, mut written: Vec<T>, mut new: Vec<T>) -> Vec<T> {
+            match self {
+                Op::Softplus | Op::Gate => new,
+                Op::SoftplusBackward => {
+                    written.append(&mut new);
+                    written
+                }
+                Op::GateBackward => {
+                    let u = written.pop().expect("u");
+                    let grad = written.pop().expect("grad");
+                    let mut out = vec![u, grad];
+                    out.append(&mut new);
+                    out
+                }
+            }
+        }
     }
 
     /// The layout of `pre` `[rows, width]` and `offset` `[groups, width]`.
@@ -222,56 +256,55 @@ mod host {
         }
     }
 
-    /// Output shapes of `op` for inputs of `shapes`.
-    pub fn output_shapes(op: Op, shapes: &[[usize; 2]]) -> Vec<[usize; 2]> {
-        let l = layout(shapes);
-        let (rows, groups) = ([l.rows, l.width], [l.groups, l.width]);
-        match op {
-            Op::Softplus | Op::Gate => vec![rows],
-            Op::SoftplusBackward => vec![rows, groups],
-            Op::GateBackward => vec![[shapes[1][0], l.width], rows, groups],
-        }
-    }
-
-    /// Host outputs of `op` as tensor data of their shapes.
+    /// The new buffers [`run`] returns as tensor data of their shapes: the activation of
+    /// the forward operations, ∂offset of the backward ones.
     pub fn to_data<E: burn::tensor::Element>(
         op: Op,
-        outputs: Vec<Vec<E>>,
+        new: Vec<Vec<E>>,
         shapes: &[[usize; 2]],
     ) -> Vec<burn::tensor::TensorData> {
-        outputs
-            .into_iter()
-            .zip(output_shapes(op, shapes))
-            .map(|(values, shape)| burn::tensor::TensorData::new(values, shape))
+        let l = layout(shapes);
+        let shape = match op {
+            Op::Softplus | Op::Gate => [l.rows, l.width],
+            Op::SoftplusBackward | Op::GateBackward => [l.groups, l.width],
+        };
+        new.into_iter()
+            .map(|values| burn::tensor::TensorData::new(values, shape))
             .collect()
     }
 
-    /// Runs `op` on host slices.
+    /// Runs `op` on host slices: `written` are its first [`Op::written_inputs`] inputs, which
+    /// it overwrites, `read` the others. Returns the new buffers.
     pub fn run<E: HostFloat>(
         op: Op,
-        inputs: &[&[E]],
+        written: &mut [&mut [E]],
+        read: &[&[E]],
         shapes: &[[usize; 2]],
         beta: f64,
     ) -> Vec<Vec<E>> {
         let l = layout(shapes);
-        match (op, inputs) {
-            (Op::Softplus, [pre, off]) => vec![softplus::softplus_forward(pre, off, l, beta)],
-            (Op::SoftplusBackward, [grad, pre, off]) => {
-                let (gp, go) = softplus::softplus_backward(grad, pre, off, l, beta);
-                vec![gp, go]
+        match (op, written, read) {
+            (Op::Softplus, [], [pre, off]) => vec![softplus::softplus_forward(pre, off, l, beta)],
+            (Op::SoftplusBackward, [grad], [pre, off]) => {
+                vec![softplus::softplus_backward_in_place(
+                    grad, pre, off, l, beta,
+                )]
             }
-            (Op::Gate, [u, pre, off]) => vec![softplus::gate_forward(u, pre, off, l, beta)],
-            (Op::GateBackward, [grad, u, pre, off]) => {
-                let (gu, gp, go) = softplus::gate_backward(grad, u, pre, off, l, beta);
-                vec![gu, gp, go]
+            (Op::Gate, [], [u, pre, off]) => vec![softplus::gate_forward(u, pre, off, l, beta)],
+            (Op::GateBackward, [grad, u], [pre, off]) => {
+                vec![softplus::gate_backward_in_place(grad, u, pre, off, l, beta)]
             }
-            _ => unreachable!("{op:?} called with {} inputs", inputs.len()),
+            (_, written, read) => unreachable!(
+                "{op:?} called with {} written and {} read inputs",
+                written.len(),
+                read.len()
+            ),
         }
     }
 }
 
 /// Implements the extension for a backend through the host loops, given how to run an
-/// operation on its tensors (`None`: dtype not handled, use the reference).
+/// operation on its tensors; dtypes the loops do not take use the reference.
 macro_rules! host_backed {
     ($backend:ty, $run:path) => {
         impl SoftplusLayerOps for $backend {
@@ -280,10 +313,10 @@ macro_rules! host_backed {
                 offset: FloatTensor<Self>,
                 beta: f64,
             ) -> FloatTensor<Self> {
-                match $run(host::Op::Softplus, vec![pre.clone(), offset.clone()], beta) {
-                    Some(mut out) => out.remove(0),
-                    None => reference::softplus_offset::<Self>(pre, offset, beta),
+                if host_dtype([pre.dtype(), offset.dtype()]).is_none() {
+                    return reference::softplus_offset::<Self>(pre, offset, beta);
                 }
+                $run(host::Op::Softplus, vec![pre, offset], beta).remove(0)
             }
 
             fn softplus_offset_backward(
@@ -292,14 +325,12 @@ macro_rules! host_backed {
                 offset: FloatTensor<Self>,
                 beta: f64,
             ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-                let inputs = vec![grad.clone(), pre.clone(), offset.clone()];
-                match $run(host::Op::SoftplusBackward, inputs, beta) {
-                    Some(out) => {
-                        let [gp, go]: [_; 2] = out.try_into().expect("two outputs");
-                        (gp, go)
-                    }
-                    None => reference::softplus_offset_backward::<Self>(grad, pre, offset, beta),
+                if host_dtype([grad.dtype(), pre.dtype(), offset.dtype()]).is_none() {
+                    return reference::softplus_offset_backward::<Self>(grad, pre, offset, beta);
                 }
+                let out = $run(host::Op::SoftplusBackward, vec![grad, pre, offset], beta);
+                let [gp, go]: [_; 2] = out.try_into().expect("two outputs");
+                (gp, go)
             }
 
             fn gate(
@@ -308,14 +339,10 @@ macro_rules! host_backed {
                 offset: FloatTensor<Self>,
                 beta: f64,
             ) -> FloatTensor<Self> {
-                match $run(
-                    host::Op::Gate,
-                    vec![u.clone(), pre.clone(), offset.clone()],
-                    beta,
-                ) {
-                    Some(mut out) => out.remove(0),
-                    None => reference::gate::<Self>(u, pre, offset, beta),
+                if host_dtype([u.dtype(), pre.dtype(), offset.dtype()]).is_none() {
+                    return reference::gate::<Self>(u, pre, offset, beta);
                 }
+                $run(host::Op::Gate, vec![u, pre, offset], beta).remove(0)
             }
 
             fn gate_backward(
@@ -325,14 +352,13 @@ macro_rules! host_backed {
                 offset: FloatTensor<Self>,
                 beta: f64,
             ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
-                let inputs = vec![grad.clone(), u.clone(), pre.clone(), offset.clone()];
-                match $run(host::Op::GateBackward, inputs, beta) {
-                    Some(out) => {
-                        let [gu, gp, go]: [_; 3] = out.try_into().expect("three outputs");
-                        (gu, gp, go)
-                    }
-                    None => reference::gate_backward::<Self>(grad, u, pre, offset, beta),
+                let dtypes = [grad.dtype(), u.dtype(), pre.dtype(), offset.dtype()];
+                if host_dtype(dtypes).is_none() {
+                    return reference::gate_backward::<Self>(grad, u, pre, offset, beta);
                 }
+                let out = $run(host::Op::GateBackward, vec![grad, u, pre, offset], beta);
+                let [gu, gp, go]: [_; 3] = out.try_into().expect("three outputs");
+                (gu, gp, go)
             }
         }
     };
@@ -349,46 +375,52 @@ fn host_dtype(dtypes: impl IntoIterator<Item = DType>) -> Option<DType> {
 #[cfg(feature = "flex")]
 mod flex {
     use burn::backend::Flex;
-    use burn::tensor::DType;
+    use burn::tensor::{DType, Element};
     use burn_flex::FlexTensor;
 
+    use super::super::softplus::HostFloat;
     use super::{SoftplusLayerOps, dims2, host, host_dtype, reference};
     use burn::backend::tensor::FloatTensor;
 
-    fn contiguous(t: FlexTensor) -> FlexTensor {
-        if t.layout().contiguous_offsets().is_some() {
+    /// `t` as a tensor whose storage is exactly its contiguous elements (copied otherwise),
+    /// keeping a uniquely owned buffer unique.
+    fn whole<E: Element + bytemuck::Pod>(t: FlexTensor) -> FlexTensor {
+        let len = t.storage::<E>().len();
+        if t.layout().contiguous_offsets() == Some((0, len)) {
             t
         } else {
-            t.to_contiguous()
+            FlexTensor::from_data(t.into_data())
         }
     }
 
-    fn run_typed<E: super::super::softplus::HostFloat + burn::tensor::Element + bytemuck::Pod>(
+    fn run_typed<E: HostFloat + Element + bytemuck::Pod>(
         op: host::Op,
-        inputs: &[FlexTensor],
-        shapes: &[[usize; 2]],
+        inputs: Vec<FlexTensor>,
         beta: f64,
-    ) -> Vec<Vec<E>> {
-        let slices: Vec<&[E]> = inputs
-            .iter()
-            .map(|t| {
-                t.as_slice::<E>()
-                    .expect("contiguous tensor of the checked dtype")
-            })
+    ) -> Vec<FlexTensor> {
+        let shapes: Vec<[usize; 2]> = inputs.iter().map(dims2).collect();
+        let mut inputs: Vec<FlexTensor> = inputs.into_iter().map(whole::<E>).collect();
+        let (written, read) = inputs.split_at_mut(op.written_inputs());
+        let new = {
+            // Copy-on-write: a buffer still shared elsewhere is copied before it is written.
+            let mut written: Vec<&mut [E]> = written.iter_mut().map(|t| t.storage_mut()).collect();
+            let read: Vec<&[E]> = read.iter().map(|t| t.storage()).collect();
+            host::run(op, &mut written, &read, &shapes, beta)
+        };
+        let new = host::to_data(op, new, &shapes)
+            .into_iter()
+            .map(FlexTensor::from_data)
             .collect();
-        host::run(op, &slices, shapes, beta)
+        inputs.truncate(op.written_inputs());
+        op.assemble(inputs, new)
     }
 
-    /// `op` on Flex tensors, or `None` for a dtype the loops do not take.
-    pub fn run(op: host::Op, inputs: Vec<FlexTensor>, beta: f64) -> Option<Vec<FlexTensor>> {
-        let dtype = host_dtype(inputs.iter().map(FlexTensor::dtype))?;
-        let inputs: Vec<FlexTensor> = inputs.into_iter().map(contiguous).collect();
-        let shapes: Vec<[usize; 2]> = inputs.iter().map(dims2).collect();
-        let outputs = match dtype {
-            DType::F32 => host::to_data(op, run_typed::<f32>(op, &inputs, &shapes, beta), &shapes),
-            _ => host::to_data(op, run_typed::<f64>(op, &inputs, &shapes, beta), &shapes),
-        };
-        Some(outputs.into_iter().map(FlexTensor::from_data).collect())
+    /// `op` on Flex tensors of a dtype [`host_dtype`] accepts.
+    pub fn run(op: host::Op, inputs: Vec<FlexTensor>, beta: f64) -> Vec<FlexTensor> {
+        match host_dtype(inputs.iter().map(|t| t.dtype())) {
+            Some(DType::F32) => run_typed::<f32>(op, inputs, beta),
+            _ => run_typed::<f64>(op, inputs, beta),
+        }
     }
 
     host_backed!(Flex, run);
@@ -402,38 +434,56 @@ mod ndarray {
     use burn::backend::tensor::FloatTensor;
     use burn::tensor::{DType, TensorData};
 
+    use super::super::softplus::HostFloat;
     use super::{SoftplusLayerOps, dims2, host, host_dtype, reference};
     use burn::backend::TensorMetadata;
 
-    /// `op` through `TensorData` copies, or `None` for a dtype the loops do not take.
+    fn run_typed<E: HostFloat + burn::tensor::Element>(
+        op: host::Op,
+        data: Vec<TensorData>,
+        shapes: &[[usize; 2]],
+        beta: f64,
+    ) -> Vec<TensorData> {
+        let mut values: Vec<Vec<E>> = data
+            .into_iter()
+            .map(|d| d.into_vec::<E>().expect("checked dtype"))
+            .collect();
+        let (written, read) = values.split_at_mut(op.written_inputs());
+        let new = {
+            let mut written: Vec<&mut [E]> = written.iter_mut().map(Vec::as_mut_slice).collect();
+            let read: Vec<&[E]> = read.iter().map(Vec::as_slice).collect();
+            host::run(op, &mut written, &read, shapes, beta)
+        };
+        values.truncate(op.written_inputs());
+        let written = values
+            .into_iter()
+            .zip(shapes)
+            .map(|(v, &shape)| TensorData::new(v, shape))
+            .collect();
+        op.assemble(written, host::to_data(op, new, shapes))
+    }
+
+    /// `op` through `TensorData` copies, for a dtype [`host_dtype`] accepts.
     pub fn run(
         op: host::Op,
         inputs: Vec<FloatTensor<NdArray>>,
         beta: f64,
-    ) -> Option<Vec<FloatTensor<NdArray>>> {
-        host_dtype(inputs.iter().map(|t| t.dtype()))?;
+    ) -> Vec<FloatTensor<NdArray>> {
+        let dtype = host_dtype(inputs.iter().map(|t| t.dtype()));
         let device = burn::backend::NdArrayDevice::default();
         let shapes: Vec<[usize; 2]> = inputs.iter().map(dims2).collect();
         let data: Vec<TensorData> = inputs
             .into_iter()
             .map(|t| burn::tensor::read_sync(NdArray::float_into_data(t)).expect("host tensor"))
             .collect();
-        let outputs = match data[0].dtype() {
-            DType::F32 => {
-                let s: Vec<&[f32]> = data.iter().map(|d| d.as_slice().expect("f32")).collect();
-                host::to_data(op, host::run(op, &s, &shapes, beta), &shapes)
-            }
-            _ => {
-                let s: Vec<&[f64]> = data.iter().map(|d| d.as_slice().expect("f64")).collect();
-                host::to_data(op, host::run(op, &s, &shapes, beta), &shapes)
-            }
+        let outputs = match dtype {
+            Some(DType::F32) => run_typed::<f32>(op, data, &shapes, beta),
+            _ => run_typed::<f64>(op, data, &shapes, beta),
         };
-        Some(
-            outputs
-                .into_iter()
-                .map(|d| NdArray::float_from_data(d, &device))
-                .collect(),
-        )
+        outputs
+            .into_iter()
+            .map(|d| NdArray::float_from_data(d, &device))
+            .collect()
     }
 
     host_backed!(NdArray, run);

@@ -17,7 +17,7 @@ use burn_flex::FlexTensor;
 use rayon::prelude::*;
 
 use super::network::{LatentOffsets, SdfNetwork};
-use super::softplus::HostFloat;
+use super::softplus::{BlockKernel, HostFloat, run_vectorized};
 
 /// Points per parallel chunk: the activations of a chunk stay in the outer caches.
 const CHUNK: usize = 2048;
@@ -160,14 +160,15 @@ impl HostForward {
                 .par_chunks(CHUNK)
                 .zip(values.par_chunks_mut(CHUNK))
                 .zip(g.par_chunks_mut(CHUNK))
-                .for_each(|((p, v), g)| self.chunk(p, v, Some(g))),
+                .for_each(|((p, v), g)| run_vectorized(self, 0, (p, v, Some(g)))),
             None => points
                 .par_chunks(CHUNK)
                 .zip(values.par_chunks_mut(CHUNK))
-                .for_each(|(p, v)| self.chunk(p, v, None)),
+                .for_each(|(p, v)| run_vectorized(self, 0, (p, v, None))),
         }
     }
 
+    #[inline(always)]
     fn chunk(&self, points: &[[f32; 3]], values: &mut [f32], gradients: Option<&mut [[f32; 3]]>) {
         let want_slopes = gradients.is_some();
         let mut slopes: Vec<Vec<f32>> = Vec::new();
@@ -200,6 +201,7 @@ impl HostForward {
     }
 
     /// The reverse pass of [`SdfNetwork::evaluate`]: δ ← (δ·Wᵀ) ⊙ σ, x rows into ∇ₓf.
+    #[inline(always)]
     fn gradient(&self, mut slopes: Vec<Vec<f32>>, out: &mut [[f32; 3]]) {
         let mut delta = slopes.pop().expect("one slope per hidden layer");
         let width = self.out_weight.len();
@@ -223,7 +225,20 @@ impl HostForward {
     }
 }
 
+/// A chunk of points: (points, values, ∇ₓf), evaluated by [`HostForward::chunk`].
+type Chunk<'a> = (&'a [[f32; 3]], &'a mut [f32], Option<&'a mut [[f32; 3]]>);
+
+impl<'a> BlockKernel<Chunk<'a>> for HostForward {
+    type Output = ();
+
+    #[inline(always)]
+    fn run(&self, _first_row: usize, (points, values, gradients): Chunk<'a>) {
+        self.chunk(points, values, gradients);
+    }
+}
+
 /// `row = offset + x·X` for the `[3, H]` rows `X`.
+#[inline(always)]
 fn add_x_rows(row: &mut [f32], p: &[f32; 3], x_rows: &[f32], offset: &[f32]) {
     let h = row.len();
     let (a, b, c) = (&x_rows[..h], &x_rows[h..2 * h], &x_rows[2 * h..3 * h]);
@@ -233,6 +248,7 @@ fn add_x_rows(row: &mut [f32], p: &[f32; 3], x_rows: &[f32], offset: &[f32]) {
 }
 
 /// `out[i] += δ_i · Xᵀ` for the `[3, H]` rows `X`.
+#[inline(always)]
 fn accumulate_x(delta: &[f32], width: usize, x_rows: &[f32], out: &mut [[f32; 3]]) {
     for (g, d) in out.iter_mut().zip(delta.chunks_exact(width)) {
         for (k, gk) in g.iter_mut().enumerate() {
@@ -241,6 +257,7 @@ fn accumulate_x(delta: &[f32], width: usize, x_rows: &[f32], out: &mut [[f32; 3]
     }
 }
 
+#[inline(always)]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     // Eight partial sums, so the loop vectorises.
     let mut acc = [0.0f32; 8];
@@ -260,6 +277,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// softplus_β in place; returns σ(βy) (the slope) when asked.
+#[inline(always)]
 fn softplus(y: &mut [f32], beta: f32, slopes: bool) -> Option<Vec<f32>> {
     let inv_beta = 1.0 / beta;
     if slopes {

@@ -140,6 +140,7 @@ pub struct RowGroups {
 
 impl RowGroups {
     /// Rows per group.
+    #[inline(always)]
     pub fn group_rows(&self) -> usize {
         self.rows / self.groups
     }
@@ -155,24 +156,58 @@ impl RowGroups {
         assert_eq!(pre.len(), self.rows * self.width, "pre-activation size");
         assert_eq!(offset.len(), self.groups * self.width, "offset size");
     }
+}
 
-    /// The offset row of `row`.
-    fn offset_row<'a, E>(&self, offset: &'a [E], row: usize) -> &'a [E] {
-        let g = row / self.group_rows();
-        &offset[g * self.width..(g + 1) * self.width]
+/// A loop over one block of rows, run by [`for_blocks`] compiled for the CPU's widest vector
+/// instructions. `B` is what the block owns (its rows of the outputs).
+///
+/// The portable build targets baseline x86-64 (SSE2), where these loops run at half the width
+/// AVX2 allows; pulp picks AVX2 + FMA (or AVX-512 with `x86-v4`) at run time and compiles
+/// [`pulp::WithSimd::with_simd`] for it. Only what is inlined into that function profits, so
+/// every `run` is `#[inline(always)]` and so is everything it calls.
+pub trait BlockKernel<B>: Sync {
+    /// What one block returns (partial reductions).
+    type Output: Send;
+    /// Processes the rows `first_row..` held by `block`.
+    fn run(&self, first_row: usize, block: B) -> Self::Output;
+}
+
+/// One block of a [`BlockKernel`] as a pulp operation.
+struct OnBlock<'k, K, B> {
+    kernel: &'k K,
+    first_row: usize,
+    block: B,
+}
+
+impl<K: BlockKernel<B>, B> pulp::WithSimd for OnBlock<'_, K, B> {
+    type Output = K::Output;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> K::Output {
+        self.kernel.run(self.first_row, self.block)
     }
 }
 
-/// Calls `body(first_row, block)` for fixed blocks of `BLOCK_ROWS` rows of `out`, in parallel,
-/// and returns what each block returned, in block order.
-fn for_blocks<E: Send, R: Send>(
-    out: &mut [E],
+/// Runs `kernel` on one block with the CPU's widest vector instructions.
+#[inline(always)]
+pub fn run_vectorized<K: BlockKernel<B>, B>(kernel: &K, first_row: usize, block: B) -> K::Output {
+    pulp::Arch::new().dispatch(OnBlock {
+        kernel,
+        first_row,
+        block,
+    })
+}
+
+/// Runs `kernel` on fixed blocks of `BLOCK_ROWS` rows of `out`, in parallel, and returns what
+/// each block returned, in block order.
+fn for_blocks<'a, E: Send, K: BlockKernel<&'a mut [E]>>(
+    out: &'a mut [E],
     width: usize,
-    body: impl Fn(usize, &mut [E]) -> R + Sync,
-) -> Vec<R> {
+    kernel: &K,
+) -> Vec<K::Output> {
     out.par_chunks_mut(BLOCK_ROWS * width)
         .enumerate()
-        .map(|(b, block)| body(b * BLOCK_ROWS, block))
+        .map(|(b, block)| run_vectorized(kernel, b * BLOCK_ROWS, block))
         .collect()
 }
 
@@ -188,6 +223,37 @@ fn sum_partials<'a, E: HostFloat>(
     total
 }
 
+/// The inputs every layer loop reads: `pre`, the offset rows and β.
+#[derive(Clone, Copy)]
+struct LayerInputs<'a, E> {
+    pre: &'a [E],
+    offset: &'a [E],
+    layout: RowGroups,
+    beta: E,
+    inv_beta: E,
+}
+
+impl<'a, E: HostFloat> LayerInputs<'a, E> {
+    fn new(pre: &'a [E], offset: &'a [E], layout: RowGroups, beta: f64) -> Self {
+        layout.check(pre, offset);
+        Self {
+            pre,
+            offset,
+            layout,
+            beta: E::of(beta),
+            inv_beta: E::of(1.0 / beta),
+        }
+    }
+
+    /// Row `r` of `pre` and its offset row, with the offset row's start.
+    #[inline(always)]
+    fn row(&self, r: usize) -> (&'a [E], &'a [E], usize) {
+        let w = self.layout.width;
+        let g0 = (r / self.layout.group_rows()) * w;
+        (&self.pre[r * w..(r + 1) * w], &self.offset[g0..g0 + w], g0)
+    }
+}
+
 /// softplus_β(pre + offset) = ln(1 + e^{β(pre+offset)})/β.
 pub fn softplus_forward<E: HostFloat>(
     pre: &[E],
@@ -195,21 +261,28 @@ pub fn softplus_forward<E: HostFloat>(
     layout: RowGroups,
     beta: f64,
 ) -> Vec<E> {
-    layout.check(pre, offset);
-    let (b, inv_b) = (E::of(beta), E::of(1.0 / beta));
-    let w = layout.width;
+    let inputs = LayerInputs::new(pre, offset, layout, beta);
     let mut out = vec![E::ZERO; pre.len()];
-    for_blocks(&mut out, w, |first, block| {
-        for (i, row) in block.chunks_exact_mut(w).enumerate() {
-            let r = first + i;
-            let off = layout.offset_row(offset, r);
-            let p = &pre[r * w..(r + 1) * w];
+    for_blocks(&mut out, layout.width, &SoftplusKernel(inputs));
+    out
+}
+
+struct SoftplusKernel<'a, E>(LayerInputs<'a, E>);
+
+impl<E: HostFloat> BlockKernel<&mut [E]> for SoftplusKernel<'_, E> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run(&self, first: usize, block: &mut [E]) {
+        let x = &self.0;
+        let (b, inv_b) = (x.beta, x.inv_beta);
+        for (i, row) in block.chunks_exact_mut(x.layout.width).enumerate() {
+            let (p, off, _) = x.row(first + i);
             for ((o, &p), &c) in row.iter_mut().zip(p).zip(off) {
                 *o = E::softplus_unit(b * (p + c)).0 * inv_b;
             }
         }
-    });
-    out
+    }
 }
 
 /// Gradients of [`softplus_forward`] given the output gradient `grad`: `(∂pre, ∂offset)`.
@@ -220,31 +293,47 @@ pub fn softplus_backward<E: HostFloat>(
     layout: RowGroups,
     beta: f64,
 ) -> (Vec<E>, Vec<E>) {
-    layout.check(pre, offset);
+    let mut grad_pre = grad.to_vec();
+    let grad_offset = softplus_backward_in_place(&mut grad_pre, pre, offset, layout, beta);
+    (grad_pre, grad_offset)
+}
+
+/// [`softplus_backward`] overwriting the output gradient with ∂pre (no new activation-sized
+/// buffer); returns ∂offset.
+pub fn softplus_backward_in_place<E: HostFloat>(
+    grad: &mut [E],
+    pre: &[E],
+    offset: &[E],
+    layout: RowGroups,
+    beta: f64,
+) -> Vec<E> {
+    let inputs = LayerInputs::new(pre, offset, layout, beta);
     assert_eq!(grad.len(), pre.len(), "gradient size");
-    let b = E::of(beta);
-    let w = layout.width;
-    let mut grad_pre = vec![E::ZERO; pre.len()];
-    let partials = for_blocks(&mut grad_pre, w, |first, block| {
-        let mut partial = vec![E::ZERO; offset.len()];
-        for (i, row) in block.chunks_exact_mut(w).enumerate() {
-            let r = first + i;
-            let g0 = (r / layout.group_rows()) * w;
-            let off = &offset[g0..g0 + w];
+    let partials = for_blocks(grad, layout.width, &SoftplusBackwardKernel(inputs));
+    sum_partials(partials.iter().map(Vec::as_slice), offset.len())
+}
+
+struct SoftplusBackwardKernel<'a, E>(LayerInputs<'a, E>);
+
+impl<E: HostFloat> BlockKernel<&mut [E]> for SoftplusBackwardKernel<'_, E> {
+    type Output = Vec<E>;
+
+    #[inline(always)]
+    fn run(&self, first: usize, block: &mut [E]) -> Vec<E> {
+        let x = &self.0;
+        let w = x.layout.width;
+        let mut partial = vec![E::ZERO; x.offset.len()];
+        for (i, g) in block.chunks_exact_mut(w).enumerate() {
+            let (p, off, g0) = x.row(first + i);
             let acc = &mut partial[g0..g0 + w];
-            let (p, g) = (&pre[r * w..(r + 1) * w], &grad[r * w..(r + 1) * w]);
-            for ((((o, &p), &c), &g), a) in row.iter_mut().zip(p).zip(off).zip(g).zip(acc) {
-                let v = g * E::sigmoid(b * (p + c));
-                *o = v;
+            for (((g, &p), &c), a) in g.iter_mut().zip(p).zip(off).zip(acc) {
+                let v = *g * E::sigmoid(x.beta * (p + c));
+                *g = v;
                 *a += v;
             }
         }
         partial
-    });
-    (
-        grad_pre,
-        sum_partials(partials.iter().map(Vec::as_slice), offset.len()),
-    )
+    }
 }
 
 /// u ⊙ σ(β(pre + offset)): one step of the reverse pass for ∇ₓf. `u` has one row per row of
@@ -256,23 +345,47 @@ pub fn gate_forward<E: HostFloat>(
     layout: RowGroups,
     beta: f64,
 ) -> Vec<E> {
-    layout.check(pre, offset);
+    let inputs = LayerInputs::new(pre, offset, layout, beta);
     let broadcast = check_gate_input(u, layout);
-    let b = E::of(beta);
-    let w = layout.width;
     let mut out = vec![E::ZERO; pre.len()];
-    for_blocks(&mut out, w, |first, block| {
+    for_blocks(
+        &mut out,
+        layout.width,
+        &GateKernel {
+            inputs,
+            u,
+            broadcast,
+        },
+    );
+    out
+}
+
+struct GateKernel<'a, E> {
+    inputs: LayerInputs<'a, E>,
+    u: &'a [E],
+    broadcast: bool,
+}
+
+impl<E: HostFloat> BlockKernel<&mut [E]> for GateKernel<'_, E> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run(&self, first: usize, block: &mut [E]) {
+        let x = &self.inputs;
+        let w = x.layout.width;
         for (i, row) in block.chunks_exact_mut(w).enumerate() {
             let r = first + i;
-            let off = layout.offset_row(offset, r);
-            let p = &pre[r * w..(r + 1) * w];
-            let u = if broadcast { u } else { &u[r * w..(r + 1) * w] };
+            let (p, off, _) = x.row(r);
+            let u = if self.broadcast {
+                self.u
+            } else {
+                &self.u[r * w..(r + 1) * w]
+            };
             for (((o, &p), &c), &u) in row.iter_mut().zip(p).zip(off).zip(u) {
-                *o = u * E::sigmoid(b * (p + c));
+                *o = u * E::sigmoid(x.beta * (p + c));
             }
         }
-    });
-    out
+    }
 }
 
 /// Whether `u` is a broadcast row; panics when it fits neither form.
@@ -299,86 +412,122 @@ pub fn gate_backward<E: HostFloat>(
     layout: RowGroups,
     beta: f64,
 ) -> (Vec<E>, Vec<E>, Vec<E>) {
-    layout.check(pre, offset);
-    assert_eq!(grad.len(), pre.len(), "gradient size");
-    let broadcast = check_gate_input(u, layout);
-    let b = E::of(beta);
-    let w = layout.width;
-    let mut grad_pre = vec![E::ZERO; pre.len()];
-    let block_len = BLOCK_ROWS * w;
-    // ∂u storage per block: its rows of ∂u, or for a broadcast u one partial row per block
-    // (summed in block order below).
-    let (mut du_store, du_len) = if broadcast {
-        (vec![E::ZERO; pre.len().div_ceil(block_len) * w], w)
-    } else {
-        (vec![E::ZERO; pre.len()], block_len)
-    };
-    let offset_partials: Vec<Vec<E>> = grad_pre
-        .par_chunks_mut(block_len)
-        .zip(du_store.par_chunks_mut(du_len))
-        .enumerate()
-        .map(|(b_idx, (block, du))| {
-            let first = b_idx * BLOCK_ROWS;
-            gate_block(grad, u, pre, offset, layout, b, first, block, du, broadcast)
-        })
-        .collect();
-    let grad_u = if broadcast {
-        sum_partials(du_store.chunks(w), w)
-    } else {
-        du_store
-    };
-    (
-        grad_u,
-        grad_pre,
-        sum_partials(offset_partials.iter().map(Vec::as_slice), offset.len()),
-    )
+    let (mut grad_pre, mut grad_u) = (grad.to_vec(), u.to_vec());
+    let grad_offset = gate_backward_in_place(&mut grad_pre, &mut grad_u, pre, offset, layout, beta);
+    (grad_u, grad_pre, grad_offset)
 }
 
-/// One block of [`gate_backward`]; returns its partial offset gradient.
-#[allow(clippy::too_many_arguments)]
-fn gate_block<E: HostFloat>(
-    grad: &[E],
-    u: &[E],
+/// [`gate_backward`] in place: `grad` becomes ∂pre and `u` becomes ∂u (a broadcast row its
+/// sum over rows); returns ∂offset.
+pub fn gate_backward_in_place<E: HostFloat>(
+    grad: &mut [E],
+    u: &mut [E],
     pre: &[E],
     offset: &[E],
     layout: RowGroups,
-    beta: E,
-    first: usize,
-    block: &mut [E],
-    du: &mut [E],
-    broadcast: bool,
+    beta: f64,
 ) -> Vec<E> {
+    let inputs = LayerInputs::new(pre, offset, layout, beta);
+    assert_eq!(grad.len(), pre.len(), "gradient size");
     let w = layout.width;
-    let mut partial = vec![E::ZERO; offset.len()];
-    for (i, row) in block.chunks_exact_mut(w).enumerate() {
-        let r = first + i;
-        let g0 = (r / layout.group_rows()) * w;
-        let off = &offset[g0..g0 + w];
-        let acc = &mut partial[g0..g0 + w];
-        let (p, g) = (&pre[r * w..(r + 1) * w], &grad[r * w..(r + 1) * w]);
-        // ∂u accumulates: over all rows for a broadcast u, once into a zeroed row otherwise.
-        let (u, du) = if broadcast {
-            (u, &mut du[..])
-        } else {
-            (&u[r * w..(r + 1) * w], &mut du[i * w..(i + 1) * w])
-        };
-        for (((((o, &p), &c), &g), a), (&u, d)) in row
-            .iter_mut()
-            .zip(p)
-            .zip(off)
-            .zip(g)
-            .zip(acc.iter_mut())
-            .zip(u.iter().zip(du.iter_mut()))
-        {
-            let s = E::sigmoid(beta * (p + c));
-            let gs = g * s;
-            *d += gs;
-            let v = gs * u * beta * (E::ONE - s);
-            *o = v;
-            *a += v;
+    let block_len = BLOCK_ROWS * w;
+    let broadcast = check_gate_input(u, layout);
+    let partials: Vec<(Vec<E>, Vec<E>)> = if broadcast {
+        // Every block reads the one row of u and sums its own partial ∂u.
+        let kernel = GateBackwardKernel { inputs, u: &*u };
+        grad.par_chunks_mut(block_len)
+            .enumerate()
+            .map(|(b, g)| run_vectorized(&kernel, b * BLOCK_ROWS, GateRows::Broadcast(g)))
+            .collect()
+    } else {
+        let kernel = GateBackwardKernel { inputs, u: &[] };
+        grad.par_chunks_mut(block_len)
+            .zip(u.par_chunks_mut(block_len))
+            .enumerate()
+            .map(|(b, (g, u))| run_vectorized(&kernel, b * BLOCK_ROWS, GateRows::PerRow(g, u)))
+            .collect()
+    };
+    if broadcast {
+        u.copy_from_slice(&sum_partials(
+            partials.iter().map(|(du, _)| du.as_slice()),
+            w,
+        ));
+    }
+    sum_partials(partials.iter().map(|(_, off)| off.as_slice()), offset.len())
+}
+
+/// (∂u, ∂pre) of one element of the gate for output gradient `g` at t = β(pre + offset):
+/// with s = σ(t), ∂u = g·s and ∂pre = g·u·β·s(1 − s).
+#[inline(always)]
+fn gate_step<E: HostFloat>(g: E, u: E, t: E, beta: E) -> (E, E) {
+    let s = E::sigmoid(t);
+    let gs = g * s;
+    (gs, gs * u * beta * (E::ONE - s))
+}
+
+/// The rows of one [`gate_backward_in_place`] block: the output gradient (→ ∂pre) and, unless
+/// u is a broadcast row, the same rows of u (→ ∂u).
+enum GateRows<'a, E> {
+    Broadcast(&'a mut [E]),
+    PerRow(&'a mut [E], &'a mut [E]),
+}
+
+struct GateBackwardKernel<'a, E> {
+    inputs: LayerInputs<'a, E>,
+    /// The broadcast row of u (empty when u is per row).
+    u: &'a [E],
+}
+
+impl<E: HostFloat> BlockKernel<GateRows<'_, E>> for GateBackwardKernel<'_, E> {
+    /// (partial ∂u of a broadcast u, or empty; partial ∂offset)
+    type Output = (Vec<E>, Vec<E>);
+
+    #[inline(always)]
+    fn run(&self, first: usize, rows: GateRows<'_, E>) -> (Vec<E>, Vec<E>) {
+        let x = &self.inputs;
+        let (w, beta) = (x.layout.width, x.beta);
+        let mut offset_partial = vec![E::ZERO; x.offset.len()];
+        match rows {
+            GateRows::Broadcast(grad) => {
+                let mut du = vec![E::ZERO; w];
+                for (i, g) in grad.chunks_exact_mut(w).enumerate() {
+                    let (p, off, g0) = x.row(first + i);
+                    let acc = &mut offset_partial[g0..g0 + w];
+                    for (((((g, &p), &c), a), &u), d) in g
+                        .iter_mut()
+                        .zip(p)
+                        .zip(off)
+                        .zip(acc)
+                        .zip(self.u)
+                        .zip(du.iter_mut())
+                    {
+                        let (du_v, dp) = gate_step(*g, u, beta * (p + c), beta);
+                        *d += du_v;
+                        *g = dp;
+                        *a += dp;
+                    }
+                }
+                (du, offset_partial)
+            }
+            GateRows::PerRow(grad, u) => {
+                for (i, (g, u)) in grad
+                    .chunks_exact_mut(w)
+                    .zip(u.chunks_exact_mut(w))
+                    .enumerate()
+                {
+                    let (p, off, g0) = x.row(first + i);
+                    let acc = &mut offset_partial[g0..g0 + w];
+                    for ((((g, u), &p), &c), a) in g.iter_mut().zip(u).zip(p).zip(off).zip(acc) {
+                        let (du_v, dp) = gate_step(*g, *u, beta * (p + c), beta);
+                        *u = du_v;
+                        *g = dp;
+                        *a += dp;
+                    }
+                }
+                (Vec::new(), offset_partial)
+            }
         }
     }
-    partial
 }
 
 #[cfg(test)]
