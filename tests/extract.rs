@@ -237,6 +237,11 @@ fn floaters_below_the_threshold_are_removed_and_the_rest_stays_closed() {
             centre: [0.7, 0.6, 0.6],
             radius: 0.04,
         },
+        // A floater of 4 % of the main surface, the size of a network's spurious blob.
+        Shape::Sphere {
+            centre: [0.6, -0.6, -0.6],
+            radius: 0.1,
+        },
     ]);
     let keep_all = ExtractOptions {
         min_component_fraction: 0.0,
@@ -244,14 +249,14 @@ fn floaters_below_the_threshold_are_removed_and_the_rest_stays_closed() {
     };
     let all = extract_surface(&scene, 64, &keep_all).unwrap();
     assert_eq!(all.removed_components, 0);
-    assert_eq!(all.mesh.euler_characteristic(), 4, "two spheres");
+    assert_eq!(all.mesh.euler_characteristic(), 6, "three spheres");
     let cleaned = extract_surface(&scene, 64, &ExtractOptions::default()).unwrap();
-    assert_eq!(cleaned.removed_components, 1);
+    assert_eq!(cleaned.removed_components, 2);
     assert_eq!(cleaned.mesh.euler_characteristic(), 2);
     assert!(cleaned.mesh.edge_report().is_closed_and_oriented());
     assert!(
         cleaned.mesh.positions.iter().all(|p| p[0] < 0.4),
-        "the speck is gone"
+        "the speck and the floater are gone"
     );
     assert_eq!(
         cleaned.mesh.normals.as_ref().unwrap().len(),

@@ -1,15 +1,18 @@
 //! `aortagen evaluate`: reconstruction fidelity of every training shape (Chamfer distance).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, ensure};
 
 use super::progress::{init_logging, terminal_bar};
+use crate::formats::{MeshMetadata, write_mesh_file};
+use crate::geometry::TriMesh;
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
+use crate::render::{View, encode_png, render_meshes};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::{DataSource, load_source_meshes};
 use crate::sdf::evaluation::{CHAMFER_UNITS, EvaluationReport, EvaluationSettings, evaluate_model};
-use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
+use crate::sdf::reconstruct::{DEFAULT_RESOLUTION, reconstruct};
 use crate::sdf::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
 use crate::sdf::store::LoadedModel;
 
@@ -34,6 +37,13 @@ pub struct EvaluateArgs {
     /// Also write the full report (per-shape CD, quantiles, histogram, floor) as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also write the worst-reconstructed shapes here: each original and its reconstruction
+    /// as PLY in mesh units, and `worst.png` with the originals above their reconstructions.
+    #[arg(long)]
+    pub worst: Option<PathBuf>,
+    /// How many of the worst shapes --worst shows.
+    #[arg(long, default_value_t = 3)]
+    pub worst_count: usize,
     /// Compute backend.
     #[arg(long, default_value = "flex")]
     pub backend: Backend,
@@ -86,7 +96,98 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         std::fs::write(path, json).with_context(|| format!("cannot write {}", path.display()))?;
         println!("report written to {}", path.display());
     }
+    if let Some(dir) = &args.worst {
+        write_worst(
+            dir,
+            args.worst_count,
+            &model,
+            &originals,
+            &report,
+            &settings,
+        )?;
+        println!(
+            "worst {} reconstructions written to {}",
+            args.worst_count.min(report.shapes.len() - report.failures),
+            dir.display()
+        );
+    }
     Ok(())
+}
+
+/// Writes the `count` shapes of largest Chamfer distance, worst first, as
+/// `{rank}_{name}_original.ply` / `_reconstruction.ply` (mesh units) and `worst.png`.
+fn write_worst(
+    dir: &Path,
+    count: usize,
+    model: &LoadedModel,
+    originals: &[TriMesh],
+    report: &EvaluationReport,
+    settings: &EvaluationSettings,
+) -> anyhow::Result<()> {
+    let mut ranked: Vec<(f64, usize, &str)> = report
+        .shapes
+        .iter()
+        .filter_map(|s| s.chamfer.map(|cd| (cd, s.index, s.name.as_str())))
+        .collect();
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+    ranked.truncate(count);
+    if ranked.is_empty() {
+        return Ok(());
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let latents = model.latents();
+    let mut reconstructions = Vec::with_capacity(ranked.len());
+    for (rank, &(cd, index, name)) in ranked.iter().enumerate() {
+        let transform = &model.manifest.shapes[index].transform;
+        let field = model.field(&latents[index])?;
+        let unit = reconstruct(&field, settings.resolution, settings.extraction)?.mesh;
+        let mesh = transform.mesh_to_mesh_units(&unit);
+        let stem = format!("{}_{}", rank + 1, file_stem(name));
+        let meta = MeshMetadata {
+            extras: serde_json::json!({ "shape": name, "index": index, "chamfer": cd }),
+            ..MeshMetadata::new("mm")
+        };
+        write_mesh_file(
+            &dir.join(format!("{stem}_original.ply")),
+            &originals[index],
+            &meta,
+        )?;
+        write_mesh_file(
+            &dir.join(format!("{stem}_reconstruction.ply")),
+            &mesh,
+            &meta,
+        )?;
+        reconstructions.push(mesh);
+    }
+    let shown: Vec<&TriMesh> = ranked
+        .iter()
+        .map(|&(_, index, _)| &originals[index])
+        .chain(&reconstructions)
+        .collect();
+    let view = View {
+        columns: Some(ranked.len()),
+        ..View::default()
+    };
+    let side = 480;
+    let image = render_meshes(&shown, side * ranked.len() as u32, 2 * side, &view)?;
+    let path = dir.join("worst.png");
+    std::fs::write(&path, encode_png(&image)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+/// A shape name usable in a file name (its path separators and dots replaced).
+fn file_stem(name: &str) -> String {
+    let stem = name.rsplit_once('.').map_or(name, |(stem, _)| stem);
+    stem.chars()
+        .map(|c| {
+            if c.is_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
 }
 
 fn print_summary(report: &EvaluationReport) {
