@@ -16,7 +16,7 @@ use super::plan::{CohortPlan, Weighting, force_anchors};
 use super::priority::spawn_background;
 use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
 use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
-use crate::anatomy::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, Targets};
+use crate::anatomy::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, Targets, check_feasible};
 use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
 use crate::sdf::generate::MAX_REDRAWS;
 use crate::sdf::generate::Selection;
@@ -273,6 +273,8 @@ async fn targeting(
         info.training_shape_count(),
     )
     .await?;
+    // A cohort accepted before the model was measured is checked here instead of at the edge.
+    check_feasible(&targets, &training.shapes)?;
     let max_candidates = cohort.max_candidates.map_or(DEFAULT_MAX_CANDIDATES, |m| {
         m.clamp(1, i64::from(u32::MAX)) as u32
     });

@@ -63,10 +63,27 @@ pub fn measure_training_shapes(
     })
 }
 
+/// One measurement of training shapes at a time: a request and the job it queued (or two
+/// first uses) wait for the same result instead of computing it twice.
+static MEASURING: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// The model's stored training-shape measurements, when they cover all `count` shapes.
+pub async fn stored_training_anatomy(
+    pool: &SqlitePool,
+    model_id: &str,
+    count: usize,
+) -> anyhow::Result<Option<TrainingAnatomy>> {
+    let Some(json) = db::models::training_anatomy(pool, model_id).await? else {
+        return Ok(None);
+    };
+    let stored: TrainingAnatomy =
+        serde_json::from_str(&json).context("stored training measurements are not JSON")?;
+    Ok((stored.shapes.len() == count).then_some(stored))
+}
+
 /// The model's training-shape measurements: stored ones, or computed off the executor and
-/// stored. The computation runs as its own task, so a request that times out while waiting
-/// for it still leaves the result stored for the next one (concurrent first uses may both
-/// compute; they store the same result).
+/// stored. The computation runs as its own task, so a caller that stops waiting for it
+/// (a request past its wait budget) still leaves the result stored for the next one.
 pub async fn training_anatomy(
     pool: &SqlitePool,
     engine: Arc<dyn CohortEngine>,
@@ -74,15 +91,15 @@ pub async fn training_anatomy(
     model_dir: &Path,
     count: usize,
 ) -> anyhow::Result<TrainingAnatomy> {
-    if let Some(json) = db::models::training_anatomy(pool, model_id).await? {
-        let stored: TrainingAnatomy =
-            serde_json::from_str(&json).context("stored training measurements are not JSON")?;
-        if stored.shapes.len() == count {
-            return Ok(stored);
-        }
+    if let Some(stored) = stored_training_anatomy(pool, model_id, count).await? {
+        return Ok(stored);
     }
     let (pool, model_id, dir) = (pool.clone(), model_id.to_owned(), model_dir.to_path_buf());
     let task = async move {
+        let _one_at_a_time = MEASURING.lock().await;
+        if let Some(stored) = stored_training_anatomy(&pool, &model_id, count).await? {
+            return Ok(stored);
+        }
         let measured = spawn_background(move || {
             measure_training_shapes(&*engine, &dir, count, &AtomicBool::new(false))
         })

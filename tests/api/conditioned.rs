@@ -8,8 +8,8 @@ use aortagen::geometry::normalize::UnitBallTransform;
 use axum::http::StatusCode;
 use serde_json::json;
 
-use crate::engine::{CENTRE_MM, TRAINING_SHAPES, ellipsoid_unit, training_axes};
-use crate::helpers::{cohort_body, cohort_body_with, spawn_app};
+use crate::engine::{AnalyticEngine, CENTRE_MM, TRAINING_SHAPES, ellipsoid_unit, training_axes};
+use crate::helpers::{cohort_body, cohort_body_with, spawn_app, spawn_on_configured};
 
 /// Centreline lengths (mm) of the analytic training ellipsoids, measured as the service
 /// measures them.
@@ -126,6 +126,44 @@ async fn an_impossible_target_is_refused_with_the_achievable_range() {
     let r = app.create_cohort(&body).await;
     assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
     assert_eq!(app.engine.calls.load(Ordering::SeqCst), calls);
+}
+
+#[tokio::test]
+async fn a_first_targeted_request_does_not_wait_out_the_measurement_and_its_job_checks() {
+    // The training shapes' measurement cannot finish until released, so a request that
+    // waited for it would run into its 3 s deadline (408).
+    let engine = AnalyticEngine {
+        hold_from_call: Some(0),
+        ..AnalyticEngine::default()
+    };
+    let dir = std::sync::Arc::new(tempfile::tempdir().unwrap());
+    let url = format!("sqlite://{}", dir.path().join("aortagen.db").display());
+    let app = spawn_on_configured(engine, dir, url, |c| c.request_timeout_secs = 3).await;
+    let longest = training_lengths().into_iter().fold(0.0, f64::max);
+    let min = (longest * 1.06).ceil();
+    let body = cohort_body_with(json!({ "targets": { "length_mm": { "min": min } } }));
+    let r = app.create_cohort(&body).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.json());
+    let cohort = r.json()["id"].as_i64().unwrap();
+
+    app.engine.release.store(true, Ordering::SeqCst);
+    app.run_pending_jobs().await;
+    let c = app.get(&format!("/v1/cohorts/{cohort}")).await.json();
+    let job = app.get(&format!("/v1/jobs/{}", c["job_id"])).await.json();
+    assert_eq!(job["status"], "failed", "{job}");
+    let error = job["error"].as_str().unwrap();
+    assert!(
+        error.contains("length_mm") && error.contains("outside the achievable range"),
+        "{error}"
+    );
+    assert_eq!(app.count("shape").await, 0);
+    // The request and the job shared one measurement, now stored: the same request is
+    // refused at the edge without measuring again.
+    assert_eq!(app.engine.calls.load(Ordering::SeqCst), TRAINING_SHAPES);
+    let r = app.create_cohort(&body).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(r.json()["rule"], "feasible");
+    assert_eq!(app.engine.calls.load(Ordering::SeqCst), TRAINING_SHAPES);
 }
 
 #[tokio::test]

@@ -67,16 +67,25 @@ async fn create_cohort(
     req.check_against(&info)?;
     let targets = req.targets()?;
     if let Some(targets) = &targets {
-        let training = training_anatomy(
+        // The first targeted request on a model measures its training shapes. It waits for
+        // that only a third of the request deadline; past it the cohort is accepted and its
+        // job, which waits for the same measurement, checks the targets instead.
+        let measuring = training_anatomy(
             &state.pool,
             state.jobs.engine.clone(),
             &model.model_id,
             std::path::Path::new(&model.dir_path),
             info.training_shape_count(),
-        )
-        .await?;
-        check_feasible(targets, &training.shapes)
-            .map_err(|e| ApiError::invalid(e.field(), "feasible", e.to_string()))?;
+        );
+        let budget = std::time::Duration::from_secs(state.config.request_timeout_secs) / 3;
+        match tokio::time::timeout(budget, measuring).await {
+            Ok(training) => check_feasible(targets, &training?.shapes)
+                .map_err(|e| ApiError::invalid(e.field(), "feasible", e.to_string()))?,
+            Err(_) => tracing::info!(
+                model_id = %model.model_id,
+                "training shapes still being measured; the cohort's job checks its targets"
+            ),
+        }
     }
     let targets_json = targets.map(|t| serde_json::to_string(&t.to_map()).expect("maps serialise"));
     let anchors = match &req.anchors {
