@@ -22,7 +22,7 @@ use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
 use crate::sdf::evaluation::EvaluationReport;
 use crate::sdf::fit::{FitSettings, fit_mesh};
-use crate::sdf::generate::{Mixture, noisy_latent};
+use crate::sdf::generate::{AnchorPart, Mixture, anchored_latent};
 use crate::sdf::manifest::MANIFEST_FILE;
 use crate::sdf::novelty::{NoveltyReference, training_surfaces};
 use crate::sdf::reconstruct::{ExtractionMethod, reconstruct};
@@ -308,28 +308,24 @@ fn mixed_latent(
         indices: spec.training_indices.clone(),
         weights: spec.weights[..k].to_vec(),
     };
-    let mut latent = noisy_latent(&mixture, latents, spec.latent_noise, spec.seed);
-    let mut parts: Vec<(f64, &crate::geometry::normalize::UnitBallTransform)> = mixture
-        .indices
+    let anchors: Vec<AnchorPart<'_>> = spec
+        .anchors
         .iter()
-        .zip(&mixture.weights)
-        .map(|(&i, &w)| (w, &transforms[i]))
+        .zip(&spec.weights[k..])
+        .map(|(anchor, &weight)| AnchorPart {
+            weight,
+            latent: &anchor.latent,
+            transform: &anchor.transform,
+        })
         .collect();
-    for (anchor, &w) in spec.anchors.iter().zip(&spec.weights[k..]) {
-        anyhow::ensure!(
-            anchor.latent.len() == latent.len(),
-            "anchor {} has {} latent values, the model {}",
-            anchor.anchor_id,
-            anchor.latent.len(),
-            latent.len()
-        );
-        for (acc, &v) in latent.iter_mut().zip(&anchor.latent) {
-            *acc = (f64::from(*acc) + w * f64::from(v)) as f32;
-        }
-        parts.push((w, &anchor.transform));
-    }
-    let transform = crate::geometry::normalize::UnitBallTransform::blend(&parts)?;
-    Ok((transform, latent))
+    Ok(anchored_latent(
+        &mixture,
+        latents,
+        transforms,
+        &anchors,
+        spec.latent_noise,
+        spec.seed,
+    )?)
 }
 
 /// Publishes the epochs saved in a checkpoint to the job that runs the training.

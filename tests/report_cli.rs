@@ -104,6 +104,7 @@ fn generate(model: &Path, out: &Path, units: Units) {
         weights: None,
         weighting: Weighting::Dirichlet,
         selection: Selection::Uniform,
+        anchors: Vec::new(),
         latent_noise: 0.0,
         min_novelty: None,
         targets: Vec::new(),

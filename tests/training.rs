@@ -121,6 +121,82 @@ fn a_tiny_run_trains_saves_loads_and_evaluates() {
 }
 
 #[test]
+fn evaluate_writes_the_worst_reconstructions_worst_first_with_a_picture() {
+    use aortagen::cli::evaluate::{EvaluateArgs, run};
+    let dir = tempfile::tempdir().unwrap();
+    train_tiny(dir.path(), 2);
+    let out = tempfile::tempdir().unwrap();
+    let json = out.path().join("evaluation.json");
+    let worst = out.path().join("worst");
+    run(EvaluateArgs {
+        model: dir.path().to_path_buf(),
+        data: None,
+        resolution: 20,
+        points: 800,
+        seed: 1,
+        json: Some(json.clone()),
+        worst: Some(worst.clone()),
+        worst_count: 2,
+        backend: Backend::Flex,
+        extraction: ExtractionMethod::Fast,
+    })
+    .unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let mut ranked: Vec<(f64, usize, String)> = report["shapes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            let name = s["name"].as_str().unwrap();
+            let stem = name.rsplit_once('.').map_or(name, |(stem, _)| stem);
+            (
+                s["chamfer"].as_f64().unwrap(),
+                s["index"].as_u64().unwrap() as usize,
+                stem.to_string(),
+            )
+        })
+        .collect();
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let model = load(dir.path());
+    let originals = load_source_meshes(&model.manifest.data.source).unwrap();
+    for (rank, (_, index, stem)) in ranked.iter().take(2).enumerate() {
+        let path = |kind: &str| worst.join(format!("{}_{stem}_{kind}.ply", rank + 1));
+        let original = aortagen::formats::read_mesh_file(&path("original")).unwrap();
+        assert_eq!(
+            original.positions, originals[*index].1.positions,
+            "rank {rank}"
+        );
+        let reconstruction = aortagen::formats::read_mesh_file(&path("reconstruction")).unwrap();
+        // In mesh units: the reconstruction's centroid is near the original's, well inside
+        // the shape's own radius.
+        let centroid = |m: &aortagen::geometry::TriMesh| {
+            let n = m.positions.len() as f64;
+            [0, 1, 2].map(|c| m.positions.iter().map(|p| f64::from(p[c])).sum::<f64>() / n)
+        };
+        let (a, b) = (centroid(&original), centroid(&reconstruction));
+        let gap = (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f64>().sqrt();
+        let radius = model.manifest.shapes[*index].transform.radius;
+        assert!(
+            gap < 0.5 * radius,
+            "rank {rank}: centroids {gap} apart, radius {radius}"
+        );
+    }
+    assert!(
+        !worst
+            .join(format!("3_{}_original.ply", ranked[2].2))
+            .exists()
+    );
+    let png = std::fs::read(worst.join("worst.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let side = |at: usize| u32::from_be_bytes(png[at..at + 4].try_into().unwrap());
+    assert_eq!(
+        (side(16), side(20)),
+        (960, 960),
+        "two columns, originals above reconstructions"
+    );
+}
+
+#[test]
 fn resuming_after_a_checkpoint_gives_the_uninterrupted_result() {
     let (straight, split) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     let full = train_tiny(straight.path(), 6);
@@ -532,5 +608,101 @@ mod cohort {
         )
         .unwrap_err();
         assert!(err.to_string().contains("arity"), "{err}");
+    }
+
+    /// Runs `aortagen generate` on `model_dir` with `anchors`, fixed `weights`, one shape at
+    /// 20³ in unit-ball PLY; returns the output directory.
+    fn generate_cli(
+        model_dir: &Path,
+        anchors: &[&str],
+        weights: &str,
+    ) -> anyhow::Result<tempfile::TempDir> {
+        use aortagen::cli::generate::{GenerateArgs, Units, run};
+        let out = tempfile::tempdir().unwrap();
+        run(GenerateArgs {
+            model: model_dir.to_path_buf(),
+            arity: 2,
+            weights: Some(weights.into()),
+            weighting: Weighting::Dirichlet,
+            selection: aortagen::sdf::generate::Selection::Uniform,
+            anchors: anchors.iter().map(|a| a.to_string()).collect(),
+            latent_noise: 0.0,
+            min_novelty: None,
+            targets: Vec::new(),
+            max_candidates: 1,
+            novelty_points: 500,
+            count: 1,
+            seed: 3,
+            resolution: 20,
+            format: aortagen::formats::MeshFormat::Ply,
+            units: Units::Unit,
+            out: out.path().to_path_buf(),
+            backend: Backend::Flex,
+            extraction: ExtractionMethod::Fast,
+        })?;
+        Ok(out)
+    }
+
+    #[test]
+    fn generate_mixes_a_fitted_anchor_in_the_last_place_of_every_shape() {
+        use aortagen::sdf::anchors::{Anchor, AnchorSet};
+        use aortagen::sdf::reconstruct::reconstruct;
+        let dir = tempfile::tempdir().unwrap();
+        train_tiny(dir.path(), 2);
+        let model = load(dir.path());
+        let latents = model.latents();
+        // An anchor that copies training shape 2 but sits elsewhere in mesh units.
+        let mut transform = model.manifest.transforms()[2];
+        transform.radius *= 2.0;
+        let mut set = AnchorSet::empty(&model.manifest);
+        let anchor = Anchor {
+            name: "patient".into(),
+            latent: latents[2].clone(),
+            transform,
+            chamfer: 1e-4,
+            source: "patient.stl".into(),
+            iterations: 1,
+            seed: 0,
+            created_unix: 0,
+        };
+        set.add(anchor, latents[2].len()).unwrap();
+        set.save(dir.path()).unwrap();
+
+        // All the weight on the anchor: the mesh is the anchor latent's own surface.
+        let out = generate_cli(dir.path(), &["patient"], "0,1").unwrap();
+        let provenance: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.path().join("shape_0000.json")).unwrap())
+                .unwrap();
+        assert_eq!(
+            provenance["anchors"],
+            serde_json::json!([{"name": "patient", "weight": 1.0}])
+        );
+        assert_eq!(provenance["indices"].as_array().unwrap().len(), 1);
+        assert_eq!(provenance["weights"], serde_json::json!([0.0]));
+        let radius = provenance["transform"]["radius"].as_f64().unwrap();
+        assert!((radius - transform.radius).abs() < 1e-9, "{radius}");
+        let written =
+            aortagen::formats::read_mesh_file(&out.path().join("shape_0000.ply")).unwrap();
+        let field = model.field(&latents[2]).unwrap();
+        let expected = reconstruct(&field, 20, ExtractionMethod::Fast)
+            .unwrap()
+            .mesh;
+        assert_eq!(written.positions, expected.positions);
+
+        // Half and half: the anchor's weight is the second one and the training part the first.
+        let out = generate_cli(dir.path(), &["patient"], "0.5,0.5").unwrap();
+        let provenance: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.path().join("shape_0000.json")).unwrap())
+                .unwrap();
+        assert_eq!(provenance["anchors"][0]["weight"], 0.5);
+        assert_eq!(provenance["weights"], serde_json::json!([0.5]));
+
+        // A name the model does not have is refused, listing the names it has.
+        let err = generate_cli(dir.path(), &["nobody"], "0,1").unwrap_err();
+        assert!(
+            err.to_string()
+                .contains("no such anchor (the model's anchors are patient)"),
+            "{err}"
+        );
     }
 }

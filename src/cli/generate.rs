@@ -12,6 +12,7 @@ use crate::anatomy::targets::{
 };
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
+use crate::sdf::anchors::AnchorSet;
 use crate::sdf::backend::Backend;
 use crate::sdf::conditioned::{candidate_mixture, measure_training_shapes};
 use crate::sdf::generate::{
@@ -52,6 +53,12 @@ pub struct GenerateArgs {
     /// from the mean and from each other).
     #[arg(long, value_enum, default_value = "uniform")]
     pub selection: Selection,
+    /// A fitted anchor of the model (the `--name` given to `aortagen fit`) forced into every
+    /// shape; repeatable, at most --arity of them. Each shape mixes every anchor plus
+    /// arity − anchors training shapes drawn as usual; weights (given or drawn) list the
+    /// training shapes first, then the anchors in the order given here.
+    #[arg(long = "anchor")]
+    pub anchors: Vec<String>,
     /// Gaussian noise added to the mixed latent, in training standard deviations (≥ 0).
     #[arg(long, default_value_t = 0.0)]
     pub latent_noise: f64,
@@ -148,6 +155,12 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     let model = LoadedModel::load(&args.model, args.backend)?;
     spec.validate(model.num_shapes())
         .map_err(|e| anyhow::anyhow!("--{}: {e}", e.field()))?;
+    let anchors = match args.anchors.is_empty() {
+        true => Vec::new(),
+        false => AnchorSet::load(&args.model, &model.manifest)?
+            .pick(&args.anchors, args.arity)
+            .map_err(|e| anyhow::anyhow!("--anchor: {e}"))?,
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let latents = model.latents();
@@ -203,6 +216,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
                     &latents,
                     mixture,
                     args.latent_noise,
+                    &anchors,
                     key,
                     resolution,
                     args.extraction,
@@ -242,6 +256,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
                 &latents,
                 &spec,
                 diversity,
+                &anchors,
                 (args.seed, shape, attempt),
                 args.resolution,
                 args.extraction,

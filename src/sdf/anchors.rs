@@ -172,6 +172,46 @@ impl AnchorSet {
         Ok(())
     }
 
+    /// The anchors named by `names`, in that order, for a cohort of `arity`: each name once,
+    /// at most `arity` of them; an unknown name is an error that lists the known ones.
+    pub fn pick(&self, names: &[String], arity: usize) -> Result<Vec<Anchor>, AnchorError> {
+        let rejected = |name: &str, reason: String| AnchorError::Rejected {
+            name: name.to_string(),
+            reason,
+        };
+        if names.len() > arity {
+            return Err(rejected(
+                &names[arity],
+                format!(
+                    "at most arity = {arity} anchors fit a shape, got {}",
+                    names.len()
+                ),
+            ));
+        }
+        names
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                if names[..i].contains(name) {
+                    return Err(rejected(name, "it is listed twice".into()));
+                }
+                self.anchors
+                    .iter()
+                    .find(|a| &a.name == name)
+                    .cloned()
+                    .ok_or_else(|| {
+                        let known: Vec<&str> =
+                            self.anchors.iter().map(|a| a.name.as_str()).collect();
+                        let known = match known.is_empty() {
+                            true => "the model has no anchors; `aortagen fit` adds them".into(),
+                            false => format!("the model's anchors are {}", known.join(", ")),
+                        };
+                        rejected(name, format!("no such anchor ({known})"))
+                    })
+            })
+            .collect()
+    }
+
     /// Writes the set to `dir/anchors.json` (temporary file, then rename).
     pub fn save(&self, dir: &Path) -> Result<(), AnchorError> {
         let path = dir.join(ANCHORS_FILE);
@@ -245,6 +285,37 @@ mod tests {
         assert_eq!(AnchorSet::load(dir.path(), &m).unwrap(), set);
         let err = AnchorSet::load(dir.path(), &manifest("bb")).unwrap_err();
         assert!(err.to_string().contains("other weights"), "{err}");
+    }
+
+    #[test]
+    fn anchors_are_picked_by_name_in_the_given_order() {
+        let m = manifest("aa");
+        let mut set = AnchorSet::empty(&m);
+        for name in ["p1", "p2", "p3"] {
+            set.add(anchor(name, 4), 4).unwrap();
+        }
+        let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let picked = set.pick(&names(&["p3", "p1"]), 2).unwrap();
+        let picked: Vec<&str> = picked.iter().map(|a| a.name.as_str()).collect();
+        assert_eq!(picked, ["p3", "p1"]);
+        let cases = [
+            (
+                names(&["p9"]),
+                2,
+                "no such anchor (the model's anchors are p1, p2, p3)",
+            ),
+            (names(&["p1", "p1"]), 2, "listed twice"),
+            (names(&["p1", "p2", "p3"]), 2, "at most arity = 2"),
+        ];
+        for (list, arity, rule) in cases {
+            let err = set.pick(&list, arity).unwrap_err().to_string();
+            assert!(err.contains(rule), "{err}");
+        }
+        let err = AnchorSet::empty(&m).pick(&names(&["p1"]), 2).unwrap_err();
+        assert!(
+            err.to_string().contains("`aortagen fit` adds them"),
+            "{err}"
+        );
     }
 
     #[test]

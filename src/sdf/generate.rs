@@ -13,6 +13,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use serde::{Deserialize, Serialize};
 
+use super::anchors::Anchor;
 use super::manifest::SIGN_CONVENTION;
 use super::reconstruct::{ExtractionMethod, ReconstructError, reconstruct};
 use super::store::LoadedModel;
@@ -386,6 +387,15 @@ impl Mixture {
         z.into_iter().map(|v| v as f32).collect()
     }
 
+    /// Makes room for `anchors` fitted latents forced into the mixture: they take the places
+    /// and the weights of its last `anchors` training shapes (all of them when there are as
+    /// many anchors as the arity). Returns the anchors' weights.
+    pub fn force_anchors(&mut self, anchors: usize) -> Vec<f64> {
+        let keep = self.indices.len().saturating_sub(anchors);
+        self.indices.truncate(keep);
+        self.weights.split_off(keep)
+    }
+
     /// The same convex combination of the shapes' unit-ball transforms.
     pub fn mix_transforms(
         &self,
@@ -428,6 +438,60 @@ pub fn parse_weights(text: &str) -> Result<Vec<f64>, String> {
         .collect()
 }
 
+/// A fitted latent (an anchor) with its weight in a mixture.
+#[derive(Debug, Clone, Copy)]
+pub struct AnchorPart<'a> {
+    /// Its share of the mixture.
+    pub weight: f64,
+    /// Its latent code (the model's latent dimension).
+    pub latent: &'a [f32],
+    /// Its mesh's unit-ball transform, blended like the training shapes'.
+    pub transform: &'a UnitBallTransform,
+}
+
+/// The latent and the blended transform of `mixture` over the training shapes plus `anchors`:
+/// the training part with `latent_noise` (scaled by the training latents' spread, drawn from
+/// `noise_seed`), then each anchor's weighted latent. The CLI and the service share it.
+pub fn anchored_latent(
+    mixture: &Mixture,
+    latents: &[Vec<f32>],
+    transforms: &[UnitBallTransform],
+    anchors: &[AnchorPart<'_>],
+    latent_noise: f64,
+    noise_seed: u64,
+) -> Result<(UnitBallTransform, Vec<f32>), GenerateError> {
+    let mut latent = noisy_latent(mixture, latents, latent_noise, noise_seed);
+    let mut parts: Vec<(f64, &UnitBallTransform)> = mixture
+        .indices
+        .iter()
+        .zip(&mixture.weights)
+        .map(|(&i, &w)| (w, &transforms[i]))
+        .collect();
+    for (index, anchor) in anchors.iter().enumerate() {
+        if anchor.latent.len() != latent.len() {
+            return Err(GenerateError::AnchorDimension {
+                index,
+                found: anchor.latent.len(),
+                expected: latent.len(),
+            });
+        }
+        for (acc, &v) in latent.iter_mut().zip(anchor.latent) {
+            *acc = (f64::from(*acc) + anchor.weight * f64::from(v)) as f32;
+        }
+        parts.push((anchor.weight, anchor.transform));
+    }
+    Ok((UnitBallTransform::blend(&parts)?, latent))
+}
+
+/// An anchor's share of a generated shape, as its provenance records it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AnchorWeight {
+    /// The anchor's name in the model's `anchors.json`.
+    pub name: String,
+    /// Its weight.
+    pub weight: f64,
+}
+
 /// Why a shape could not be generated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum GenerateError {
@@ -440,6 +504,16 @@ pub enum GenerateError {
     /// The mixed latent gave no mesh.
     #[error(transparent)]
     Reconstruct(#[from] ReconstructError),
+    /// An anchor's latent does not fit the model.
+    #[error("anchor {index} has {found} latent values, the model {expected}")]
+    AnchorDimension {
+        /// Position of the anchor in the mixture's anchor list.
+        index: usize,
+        /// Its latent length.
+        found: usize,
+        /// The model's latent dimension.
+        expected: usize,
+    },
 }
 
 /// One generated shape before it is written anywhere.
@@ -447,6 +521,8 @@ pub enum GenerateError {
 pub struct GeneratedShape {
     /// Which training shapes, with which weights.
     pub mixture: Mixture,
+    /// The fitted anchors mixed in, with their weights (empty without anchors).
+    pub anchors: Vec<AnchorWeight>,
     /// Blended unit-ball transform (to return the mesh in mesh units).
     pub transform: UnitBallTransform,
     /// The mesh in unit-ball coordinates, with normals.
@@ -475,18 +551,22 @@ pub fn generate_shape(
         latents,
         spec,
         Diversity::default(),
+        &[],
         (seed, shape, 0),
         resolution,
         extraction,
     )
 }
 
-/// [`generate_shape`] with diversity controls, for draw `attempt` of `(seed, shape, attempt)`.
+/// [`generate_shape`] with diversity controls and `anchors` forced into the mixture (see
+/// [`generate_from_mixture`]), for draw `attempt` of `(seed, shape, attempt)`.
+#[allow(clippy::too_many_arguments)]
 pub fn generate_shape_with(
     model: &LoadedModel,
     latents: &[Vec<f32>],
     spec: &MixSpec,
     diversity: Diversity,
+    anchors: &[Anchor],
     (seed, shape, attempt): (u64, u64, u32),
     resolution: usize,
     extraction: ExtractionMethod,
@@ -497,6 +577,7 @@ pub fn generate_shape_with(
         latents,
         mixture,
         diversity.latent_noise,
+        anchors,
         (seed, shape, attempt),
         resolution,
         extraction,
@@ -504,23 +585,50 @@ pub fn generate_shape_with(
 }
 
 /// Meshes a given mixture of draw `attempt` of `(seed, shape, attempt)` (the latent noise
-/// is drawn from the same seed as in [`generate_shape_with`]).
+/// is drawn from the same seed as in [`generate_shape_with`]). `anchors` take the places and
+/// weights of the mixture's last entries ([`Mixture::force_anchors`]), as in the service.
+#[allow(clippy::too_many_arguments)]
 pub fn generate_from_mixture(
     model: &LoadedModel,
     latents: &[Vec<f32>],
-    mixture: Mixture,
+    mut mixture: Mixture,
     latent_noise: f64,
+    anchors: &[Anchor],
     (seed, shape, attempt): (u64, u64, u32),
     resolution: usize,
     extraction: ExtractionMethod,
 ) -> Result<GeneratedShape, GenerateError> {
-    let transform = mixture.mix_transforms(&model.manifest.transforms())?;
+    let anchor_weights = mixture.force_anchors(anchors.len());
+    let parts: Vec<AnchorPart<'_>> = anchors
+        .iter()
+        .zip(&anchor_weights)
+        .map(|(a, &weight)| AnchorPart {
+            weight,
+            latent: &a.latent,
+            transform: &a.transform,
+        })
+        .collect();
     let noise_seed = attempt_seed(seed ^ shape.rotate_left(32), attempt);
-    let latent = noisy_latent(&mixture, latents, latent_noise, noise_seed);
+    let (transform, latent) = anchored_latent(
+        &mixture,
+        latents,
+        &model.manifest.transforms(),
+        &parts,
+        latent_noise,
+        noise_seed,
+    )?;
     let field = model.field(&latent).map_err(ReconstructError::from)?;
     let mesh = reconstruct(&field, resolution, extraction)?.mesh;
     Ok(GeneratedShape {
         mixture,
+        anchors: anchors
+            .iter()
+            .zip(anchor_weights)
+            .map(|(a, weight)| AnchorWeight {
+                name: a.name.clone(),
+                weight,
+            })
+            .collect(),
         transform,
         mesh,
     })
@@ -541,6 +649,9 @@ pub struct Provenance {
     pub names: Vec<String>,
     /// Their weights.
     pub weights: Vec<f64>,
+    /// Fitted anchors mixed in after the training shapes, with their weights.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub anchors: Vec<AnchorWeight>,
     /// Cohort seed.
     pub seed: u64,
     /// Grid resolution of the reconstruction.
@@ -606,6 +717,7 @@ impl Provenance {
                 .map(|&i| names[i].name.clone())
                 .collect(),
             weights: generated.mixture.weights.clone(),
+            anchors: generated.anchors.clone(),
             seed,
             resolution,
             software_version: crate::VERSION.to_string(),
