@@ -233,6 +233,23 @@ struct Collector<'a> {
     format: MeshFormat,
 }
 
+/// A vertex attribute the reader takes as `[f32; 3]`: VEC3 of FLOAT, not normalised.
+fn check_vec3_float(accessor: &gltf::Accessor<'_>) -> Result<(), String> {
+    use gltf::accessor::{DataType, Dimensions};
+    let (kind, dims) = (accessor.data_type(), accessor.dimensions());
+    if kind == DataType::F32 && dims == Dimensions::Vec3 && !accessor.normalized() {
+        return Ok(());
+    }
+    Err(format!(
+        "the accessor must be VEC3 of FLOAT, it is {dims:?} of {kind:?}{}",
+        if accessor.normalized() {
+            " (normalized)"
+        } else {
+            ""
+        }
+    ))
+}
+
 impl Collector<'_> {
     fn append_mesh(
         &mut self,
@@ -246,6 +263,13 @@ impl Collector<'_> {
             let err =
                 |msg: &str| FormatError::malformed_at(self.name, self.format, at.clone(), msg);
             let buffers = self.buffers;
+            // gltf's attribute readers assert the accessor's element size; check the types
+            // first so that a mistyped accessor is an error that names it.
+            for semantic in [gltf::Semantic::Positions, gltf::Semantic::Normals] {
+                if let Some(accessor) = primitive.get(&semantic) {
+                    check_vec3_float(&accessor).map_err(|e| err(&format!("{semantic:?}: {e}")))?;
+                }
+            }
             let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
             let positions: Vec<[f32; 3]> = reader
                 .read_positions()

@@ -346,6 +346,12 @@ fn inputs_found_by_fuzzing_are_errors() {
             MeshFormat::Glb,
             "indices must be unsigned integers",
         ),
+        // gltf's attribute reader asserts the element size of a mistyped NORMAL accessor.
+        (
+            "scalar_normals.gltf",
+            MeshFormat::Gltf,
+            "Normals: the accessor must be VEC3 of FLOAT",
+        ),
     ] {
         let bytes = std::fs::read(dir.join(file)).unwrap();
         let err = read_mesh_bytes(&bytes, format, file)
