@@ -74,7 +74,11 @@ fn check_accessor_references(bytes: &[u8], format: MeshFormat) -> Result<(), Str
 }
 
 fn check_accessor_json(json: &[u8]) -> Result<(), String> {
-    let Ok(root) = serde_json::from_slice::<serde_json::Value>(json) else {
+    // The glTF parser skips unknown fields without checking their UTF-8, so a document it
+    // accepts may hold invalid bytes: read those as U+FFFD here rather than skip the check.
+    let parsed = serde_json::from_slice::<serde_json::Value>(json)
+        .or_else(|_| serde_json::from_str(&String::from_utf8_lossy(json)));
+    let Ok(root) = parsed else {
         return Ok(()); // the glTF parser reports malformed JSON with its position
     };
     let accessors = root["accessors"].as_array().map_or(0, Vec::len) as u64;

@@ -352,6 +352,13 @@ fn inputs_found_by_fuzzing_are_errors() {
             MeshFormat::Gltf,
             "Normals: the accessor must be VEC3 of FLOAT",
         ),
+        // No accessors (the key is misspelt) and invalid UTF-8 in a field the parser skips:
+        // gltf's validation indexed the empty accessor list.
+        (
+            "dangling_position_invalid_utf8.gltf",
+            MeshFormat::Gltf,
+            "refers to accessor 1, but there are only 0",
+        ),
     ] {
         let bytes = std::fs::read(dir.join(file)).unwrap();
         let err = read_mesh_bytes(&bytes, format, file)
