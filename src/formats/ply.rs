@@ -5,7 +5,9 @@
 use std::fmt::Write as _;
 
 use ply_rs_bw::parser::{Parser, Reader};
-use ply_rs_bw::ply::{DefaultElement, Encoding, Header, Property};
+use ply_rs_bw::ply::{
+    DefaultElement, ElementDef, Encoding, Header, Property, PropertyType, ScalarType,
+};
 
 use super::{FormatError, LoadedMesh, MeshFormat, MeshMetadata, guard, units_in};
 use crate::geometry::TriMesh;
@@ -64,6 +66,26 @@ fn parse(bytes: &[u8], name: &str) -> Result<Parsed, FormatError> {
             ));
         }
     };
+    // The parser keeps every element in memory: refuse counts the file cannot hold before
+    // it allocates for them.
+    let payload = reader.get_ref().len();
+    for (key, def) in &header.elements {
+        let least = def
+            .count
+            .saturating_mul(min_element_bytes(def, header.encoding));
+        if least > payload {
+            return Err(FormatError::malformed_at(
+                name,
+                FORMAT,
+                format!("element '{key}'"),
+                format!(
+                    "the header declares {} '{key}' elements, at least {least} bytes, but only \
+                     {payload} bytes follow the header",
+                    def.count
+                ),
+            ));
+        }
+    }
     let (mut vertices, mut faces) = (None, None);
     for (key, def) in &header.elements {
         let elements = parser
@@ -99,6 +121,28 @@ fn parse(bytes: &[u8], name: &str) -> Result<Parsed, FormatError> {
         vertices.ok_or_else(|| missing("vertex"))?,
         faces.ok_or_else(|| missing("face"))?,
     ))
+}
+
+/// The fewest bytes one element of `def` takes: its scalars' sizes (a list at least its
+/// length field) in binary, two characters per property in ASCII; at least one byte.
+fn min_element_bytes(def: &ElementDef, encoding: Encoding) -> usize {
+    let size = |t: &ScalarType| match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
+    };
+    let bytes: usize = match encoding {
+        Encoding::Ascii => 2 * def.properties.len(),
+        _ => def
+            .properties
+            .values()
+            .map(|p| match &p.data_type {
+                PropertyType::Scalar(t) | PropertyType::List(t, _) => size(t),
+            })
+            .sum(),
+    };
+    bytes.max(1)
 }
 
 /// The parser's multi-line messages on one line, without its own "Line N:" prefix.

@@ -359,6 +359,12 @@ fn inputs_found_by_fuzzing_are_errors() {
             MeshFormat::Gltf,
             "refers to accessor 1, but there are only 0",
         ),
+        // An element count of 5·10¹⁵ vertices in a 2 kB file: the parser allocated for it.
+        (
+            "huge_element_count.ply",
+            MeshFormat::Ply,
+            "elements, at least",
+        ),
     ] {
         let bytes = std::fs::read(dir.join(file)).unwrap();
         let err = read_mesh_bytes(&bytes, format, file)
