@@ -401,13 +401,19 @@ impl Mixture {
         &self,
         transforms: &[UnitBallTransform],
     ) -> Result<UnitBallTransform, BlendError> {
-        let parts: Vec<(f64, &UnitBallTransform)> = self
-            .indices
+        UnitBallTransform::blend(&self.transform_parts(transforms))
+    }
+
+    /// Each chosen shape's transform with its weight, the parts of the blend.
+    fn transform_parts<'t>(
+        &self,
+        transforms: &'t [UnitBallTransform],
+    ) -> Vec<(f64, &'t UnitBallTransform)> {
+        self.indices
             .iter()
             .zip(&self.weights)
             .map(|(&i, &w)| (w, &transforms[i]))
-            .collect();
-        UnitBallTransform::blend(&parts)
+            .collect()
     }
 }
 
@@ -461,12 +467,7 @@ pub fn anchored_latent(
     noise_seed: u64,
 ) -> Result<(UnitBallTransform, Vec<f32>), GenerateError> {
     let mut latent = noisy_latent(mixture, latents, latent_noise, noise_seed);
-    let mut parts: Vec<(f64, &UnitBallTransform)> = mixture
-        .indices
-        .iter()
-        .zip(&mixture.weights)
-        .map(|(&i, &w)| (w, &transforms[i]))
-        .collect();
+    let mut parts = mixture.transform_parts(transforms);
     for (index, anchor) in anchors.iter().enumerate() {
         if anchor.latent.len() != latent.len() {
             return Err(GenerateError::AnchorDimension {
