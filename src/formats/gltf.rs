@@ -254,6 +254,65 @@ fn check_vec3_float(accessor: &gltf::Accessor<'_>) -> Result<(), String> {
     ))
 }
 
+/// gltf's readers compute an accessor's last byte as `offset + stride·(count − 1) + size`
+/// without checking it: an empty accessor underflows and a huge count overflows. Check the
+/// same arithmetic here, for the accessor and its sparse parts, so such a file is an error.
+fn check_layout(accessor: &gltf::Accessor<'_>) -> Result<(), String> {
+    let size = accessor.size();
+    if accessor.count() == 0 {
+        return Err("the accessor has count 0".into());
+    }
+    if let Some(view) = accessor.view() {
+        check_span(&view, accessor.offset(), accessor.count(), size)?;
+    }
+    if let Some(sparse) = accessor.sparse() {
+        let count = sparse.count();
+        if count == 0 {
+            return Err("the sparse accessor has count 0".into());
+        }
+        let indices = sparse.indices();
+        check_span(
+            &indices.view(),
+            indices.offset(),
+            count,
+            indices.index_type().size(),
+        )
+        .map_err(|e| format!("sparse indices: {e}"))?;
+        let values = sparse.values();
+        check_span(&values.view(), values.offset(), count, size)
+            .map_err(|e| format!("sparse values: {e}"))?;
+    }
+    Ok(())
+}
+
+/// `count` elements of `size` bytes from `offset` fit in `view` at its stride.
+fn check_span(
+    view: &gltf::buffer::View<'_>,
+    offset: usize,
+    count: usize,
+    size: usize,
+) -> Result<(), String> {
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(format!(
+            "the buffer view's stride {stride} is smaller than the element size {size}"
+        ));
+    }
+    let end = count
+        .checked_sub(1)
+        .and_then(|last| stride.checked_mul(last))
+        .and_then(|span| span.checked_add(offset))
+        .and_then(|span| span.checked_add(size));
+    match end {
+        Some(end) if end <= view.length() => Ok(()),
+        _ => Err(format!(
+            "{count} elements of {size} bytes from offset {offset} do not fit in the buffer \
+             view's {} bytes",
+            view.length()
+        )),
+    }
+}
+
 impl Collector<'_> {
     fn append_mesh(
         &mut self,
@@ -271,7 +330,9 @@ impl Collector<'_> {
             // first so that a mistyped accessor is an error that names it.
             for semantic in [gltf::Semantic::Positions, gltf::Semantic::Normals] {
                 if let Some(accessor) = primitive.get(&semantic) {
-                    check_vec3_float(&accessor).map_err(|e| err(&format!("{semantic:?}: {e}")))?;
+                    check_vec3_float(&accessor)
+                        .and_then(|()| check_layout(&accessor))
+                        .map_err(|e| err(&format!("{semantic:?}: {e}")))?;
                 }
             }
             let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
@@ -290,6 +351,7 @@ impl Collector<'_> {
                          UNSIGNED_INT), the accessor has {kind:?}"
                     )));
                 }
+                check_layout(&accessor).map_err(|e| err(&format!("indices: {e}")))?;
             }
             let indices: Vec<u32> = match (primitive.indices(), reader.read_indices()) {
                 (_, Some(i)) => i.into_u32().collect(),

@@ -257,8 +257,31 @@ fn malformed_cases() -> Vec<Case> {
                 .into_bytes(),
             &[
                 "mesh 0 primitive 0",
-                "indices accessor lies outside its buffer",
+                "indices: 40 elements of 4 bytes from offset 0 do not fit in the buffer view's 144 bytes",
             ],
+        ),
+        // gltf's readers compute an accessor's end without checking it: these underflowed,
+        // overflowed or read elements overlapping each other.
+        case(
+            "gltf empty positions",
+            Gltf,
+            gltf.replacen("\"count\": 8", "\"count\": 0", 1)
+                .into_bytes(),
+            &["mesh 0 primitive 0", "Positions: the accessor has count 0"],
+        ),
+        case(
+            "gltf huge count",
+            Gltf,
+            gltf.replacen("\"count\": 36", "\"count\": 9223372036854775807", 1)
+                .into_bytes(),
+            &["indices: 9223372036854775807 elements of 4 bytes", "do not fit"],
+        ),
+        case(
+            "gltf short stride",
+            Gltf,
+            gltf.replacen("\"byteOffset\": 0,", "\"byteOffset\": 0, \"byteStride\": 8,", 1)
+                .into_bytes(),
+            &["Positions: the buffer view's stride 8 is smaller than the element size 12"],
         ),
         // Found by fuzzing: float indices made the glTF crate reach `unreachable!`.
         case(
@@ -358,6 +381,12 @@ fn inputs_found_by_fuzzing_are_errors() {
             "dangling_position_invalid_utf8.gltf",
             MeshFormat::Gltf,
             "refers to accessor 1, but there are only 0",
+        ),
+        // A NORMAL accessor with count 0: gltf's reader computed its end as `count − 1`.
+        (
+            "empty_normal_accessor.glb",
+            MeshFormat::Glb,
+            "Normals: the accessor has count 0",
         ),
         // An element count of 5·10¹⁵ vertices in a 2 kB file: the parser allocated for it.
         (
