@@ -274,13 +274,20 @@ fn malformed_cases() -> Vec<Case> {
             Gltf,
             gltf.replacen("\"count\": 36", "\"count\": 9223372036854775807", 1)
                 .into_bytes(),
-            &["indices: 9223372036854775807 elements of 4 bytes", "do not fit"],
+            &[
+                "indices: 9223372036854775807 elements of 4 bytes",
+                "do not fit",
+            ],
         ),
         case(
             "gltf short stride",
             Gltf,
-            gltf.replacen("\"byteOffset\": 0,", "\"byteOffset\": 0, \"byteStride\": 8,", 1)
-                .into_bytes(),
+            gltf.replacen(
+                "\"byteOffset\": 0,",
+                "\"byteOffset\": 0, \"byteStride\": 8,",
+                1,
+            )
+            .into_bytes(),
             &["Positions: the buffer view's stride 8 is smaller than the element size 12"],
         ),
         // Found by fuzzing: float indices made the glTF crate reach `unreachable!`.
