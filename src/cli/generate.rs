@@ -5,18 +5,19 @@ use std::path::PathBuf;
 use anyhow::{Context, ensure};
 
 use super::progress::{init_logging, terminal_bar};
-use crate::anatomy::shape::measure_shape;
+use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
 use crate::anatomy::targets::{
-    DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, Measured, SCREEN_RESOLUTION, TargetRange, Targets,
-    check_feasible, guided_pool, parse_target_arg, search, training_ranges,
+    CandidateSource, DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, Measured, SCREEN_RESOLUTION,
+    TargetRange, Targets, check_feasible, guided_pool, parse_target_arg, refine_weights, search,
+    training_ranges,
 };
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
-use crate::sdf::anchors::AnchorSet;
+use crate::sdf::anchors::{Anchor, AnchorSet};
 use crate::sdf::backend::Backend;
 use crate::sdf::conditioned::{candidate_mixture, measure_training_shapes};
 use crate::sdf::generate::{
-    Diversity, GeneratedShape, MAX_REDRAWS, MixSpec, Provenance, Selection, Weighting,
+    Diversity, GeneratedShape, MAX_REDRAWS, MixSpec, Mixture, Provenance, Selection, Weighting,
     generate_from_mixture, generate_shape_with, parse_weights,
 };
 use crate::sdf::novelty::{Novelty, NoveltyReference, training_surfaces};
@@ -71,7 +72,8 @@ pub struct GenerateArgs {
     /// empty; repeatable), e.g. `--target annulus_mm=23:27`. Names: annulus_mm, sinus_mm,
     /// stj_mm, sinus_height_mm, ascending_mm, length_mm, max_diameter_mm. Each shape then
     /// searches up to --max-candidates mixtures, screened on a 64³ mesh, for one inside
-    /// every range; when none is, the closest is kept and flagged `targets_met: false`.
+    /// every range: fresh draws, and (with drawn weights) refinements of a missing draw's
+    /// weights; when none is inside, the closest is kept and flagged `targets_met: false`.
     #[arg(long = "target", value_parser = parse_target_arg)]
     pub targets: Vec<(String, TargetRange)>,
     /// Most candidates per shape with --target (1–100).
@@ -178,7 +180,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     .context("cannot reconstruct the training shapes for the novelty measure")?;
     let reference = NoveltyReference::new(&surfaces, args.novelty_points)?;
     let screen_resolution = SCREEN_RESOLUTION.min(args.resolution);
-    let pool = match &targets {
+    let (pool, training) = match &targets {
         Some(targets) => {
             let training =
                 measure_training_shapes(&model, &latents, SCREEN_RESOLUTION, args.extraction)
@@ -192,9 +194,9 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
                 }
             }
             check_feasible(targets, &training).map_err(|e| anyhow::anyhow!("--target: {e}"))?;
-            guided_pool(targets, &training, args.arity)
+            (guided_pool(targets, &training, args.arity), training)
         }
-        None => Vec::new(),
+        None => (Vec::new(), Vec::new()),
     };
     let attempts = if args.min_novelty.is_some() {
         MAX_REDRAWS + 1
@@ -208,45 +210,32 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         let mut redraws = 0;
         let mut searched = None;
         if let Some(targets) = &targets {
-            let mesh_at = |attempt: u32, resolution: usize| -> anyhow::Result<GeneratedShape> {
-                let key = (args.seed, shape, attempt);
-                let mixture = candidate_mixture(&spec, &latents, args.selection, key, &pool)?;
-                generate_from_mixture(
-                    &model,
-                    &latents,
-                    mixture,
-                    args.latent_noise,
-                    &anchors,
-                    key,
-                    resolution,
-                    args.extraction,
-                )
-                .map_err(anyhow::Error::from)
+            let mut source = TargetedShape {
+                model: &model,
+                latents: &latents,
+                spec: &spec,
+                args: &args,
+                anchors: &anchors,
+                reference: &reference,
+                pool: &pool,
+                training: &training,
+                targets,
+                key: (args.seed, shape),
+                screen_resolution,
             };
             let outcome = search(
                 targets,
                 args.max_candidates,
                 screen_resolution < args.resolution,
-                |attempt| {
-                    let g = mesh_at(attempt, screen_resolution)?;
-                    Ok::<_, anyhow::Error>(
-                        measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string()),
-                    )
-                },
-                |attempt| {
-                    let g = mesh_at(attempt, args.resolution)?;
-                    let novelty = reference.novelty(&g.mesh, args.seed ^ shape)?;
-                    let anatomy = measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string());
-                    Ok(Measured {
-                        rank: novelty.chamfer,
-                        accept: args.min_novelty.is_none_or(|m| novelty.chamfer >= m),
-                        candidate: (g, novelty, attempt),
-                        anatomy,
-                    })
-                },
+                &mut source,
             )
             .with_context(|| format!("shape {shape}"))?;
-            searched = Some((outcome.candidates, outcome.met, outcome.kept.anatomy.ok()));
+            searched = Some((
+                outcome.candidates,
+                outcome.met,
+                outcome.kept.anatomy.ok(),
+                outcome.refined,
+            ));
             best = Some(outcome.kept.candidate);
         }
         let attempts = if searched.is_some() { 0 } else { attempts };
@@ -321,7 +310,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
                 ", below --min-novelty"
             },
         ));
-        if let (Some(targets), Some((candidates, met, anatomy))) = (&targets, &searched) {
+        if let (Some(targets), Some((candidates, met, anatomy, refined))) = (&targets, &searched) {
             let values: Vec<String> = targets
                 .iter()
                 .map(|(m, _)| {
@@ -335,7 +324,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
                 .collect();
             let line = report.last_mut().expect("a line was just pushed");
             line.push_str(&format!(
-                "; {}; {candidates} candidates, {}",
+                "; {}; {candidates} candidates ({refined} weight refinements), {}",
                 values.join(", "),
                 if *met {
                     "targets met"
@@ -369,4 +358,102 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// The candidates of one targeted shape: mixtures drawn (and weight-refined) from the
+/// command line's spec, meshed by the loaded model. A spec keeps its draw's attempt, which
+/// seeds the latent noise, so a refinement changes only the weights.
+struct TargetedShape<'a> {
+    model: &'a LoadedModel,
+    latents: &'a [Vec<f32>],
+    spec: &'a MixSpec,
+    args: &'a GenerateArgs,
+    anchors: &'a [Anchor],
+    reference: &'a NoveltyReference,
+    pool: &'a [usize],
+    training: &'a [Option<ShapeAnatomy>],
+    targets: &'a Targets,
+    /// (seed, shape index).
+    key: (u64, u64),
+    screen_resolution: usize,
+}
+
+impl TargetedShape<'_> {
+    fn mesh(
+        &self,
+        (mixture, attempt): &(Mixture, u32),
+        resolution: usize,
+    ) -> anyhow::Result<GeneratedShape> {
+        let (seed, shape) = self.key;
+        Ok(generate_from_mixture(
+            self.model,
+            self.latents,
+            mixture.clone(),
+            self.args.latent_noise,
+            self.anchors,
+            (seed, shape, *attempt),
+            resolution,
+            self.args.extraction,
+        )?)
+    }
+}
+
+impl CandidateSource for TargetedShape<'_> {
+    type Spec = (Mixture, u32);
+    type Kept = (GeneratedShape, Novelty, u32);
+    type Error = anyhow::Error;
+
+    fn draw(&mut self, attempt: u32) -> anyhow::Result<(Mixture, u32)> {
+        let (seed, shape) = self.key;
+        let key = (seed, shape, attempt);
+        let mixture =
+            candidate_mixture(self.spec, self.latents, self.args.selection, key, self.pool)?;
+        Ok((mixture, attempt))
+    }
+
+    /// Only drawn weights are refined: `--weights` and `--weighting equal` are kept.
+    fn refine(
+        &mut self,
+        (mixture, attempt): &(Mixture, u32),
+        measured: &ShapeAnatomy,
+    ) -> Option<(Mixture, u32)> {
+        if self.spec.weights.is_some() || self.spec.weighting != Weighting::Dirichlet {
+            return None;
+        }
+        let parts = mixture.indices.len().saturating_sub(self.anchors.len());
+        let weights = refine_weights(
+            self.targets,
+            self.training,
+            &mixture.indices[..parts],
+            &mixture.weights,
+            measured,
+        )?;
+        let refined = Mixture {
+            indices: mixture.indices.clone(),
+            weights,
+        };
+        Some((refined, *attempt))
+    }
+
+    fn screen(&mut self, spec: &(Mixture, u32)) -> anyhow::Result<Result<ShapeAnatomy, String>> {
+        let g = self.mesh(spec, self.screen_resolution)?;
+        Ok(measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string()))
+    }
+
+    /// Keeps the draw's attempt, which with the weights in the provenance reproduces it.
+    fn finalize(
+        &mut self,
+        _: u32,
+        spec: &(Mixture, u32),
+    ) -> anyhow::Result<Measured<(GeneratedShape, Novelty, u32)>> {
+        let g = self.mesh(spec, self.args.resolution)?;
+        let novelty = self.reference.novelty(&g.mesh, self.key.0 ^ self.key.1)?;
+        let anatomy = measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string());
+        Ok(Measured {
+            rank: novelty.chamfer,
+            accept: self.args.min_novelty.is_none_or(|m| novelty.chamfer >= m),
+            candidate: (g, novelty, spec.1),
+            anatomy,
+        })
+    }
 }

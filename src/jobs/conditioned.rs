@@ -13,12 +13,12 @@ use sqlx::SqlitePool;
 use super::cohort::{Candidate, draw};
 use super::engine::{AnchorLatent, CohortEngine, GeneratedShape, ShapeSpec};
 use super::join_error;
-use super::plan::{CohortPlan, force_anchors};
+use super::plan::{CohortPlan, Weighting, force_anchors};
 use super::priority::spawn_background;
 use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
 use crate::anatomy::targets::{
-    Measured, SCREEN_RESOLUTION, SearchOutcome, Targets, guided_indices, guided_pool, is_guided,
-    search,
+    CandidateSource, Measured, SCREEN_RESOLUTION, SearchOutcome, Targets, guided_indices,
+    guided_pool, is_guided, refine_weights, search,
 };
 use crate::db;
 use crate::sdf::novelty::NoveltyReference;
@@ -130,6 +130,8 @@ pub struct Targeting {
     pub max_candidates: u32,
     /// Training shapes that guided candidates mix ([`guided_pool`]).
     pub pool: Vec<usize>,
+    /// The training shapes' measurements, which weight refinement predicts from.
+    pub training: Vec<Option<ShapeAnatomy>>,
 }
 
 impl Targeting {
@@ -145,6 +147,7 @@ impl Targeting {
             targets,
             max_candidates,
             pool,
+            training: training.shapes.clone(),
         }
     }
 
@@ -156,6 +159,30 @@ impl Targeting {
             spec.training_indices = guided_indices(spec.seed, &self.pool, plan.arity);
         }
         spec
+    }
+
+    /// `spec` with weights refined towards the targets from what it measured, when the plan
+    /// draws its weights (fixed or equal weights asked for are kept).
+    pub fn refine(
+        &self,
+        plan: &CohortPlan,
+        spec: &ShapeSpec,
+        measured: &ShapeAnatomy,
+    ) -> Option<ShapeSpec> {
+        if plan.weights.is_some() || plan.weighting != Weighting::Dirichlet {
+            return None;
+        }
+        let weights = refine_weights(
+            &self.targets,
+            &self.training,
+            &spec.training_indices,
+            &spec.weights,
+            measured,
+        )?;
+        Some(ShapeSpec {
+            weights,
+            ..spec.clone()
+        })
     }
 }
 
@@ -177,43 +204,72 @@ pub(super) async fn search_shape(
     s: ShapeSearch,
     index: u64,
 ) -> anyhow::Result<SearchOutcome<Candidate>> {
-    spawn_background(move || search_blocking(&s, index))
-        .await
-        .map_err(join_error)?
+    spawn_background(move || {
+        let t = s.targeting.clone();
+        let screening = SCREEN_RESOLUTION.min(s.plan.resolution) < s.plan.resolution;
+        search(
+            &t.targets,
+            t.max_candidates,
+            screening,
+            &mut ShapeCandidates { s: &s, index },
+        )
+    })
+    .await
+    .map_err(join_error)?
 }
 
-fn search_blocking(s: &ShapeSearch, index: u64) -> anyhow::Result<SearchOutcome<Candidate>> {
-    let screen_resolution = SCREEN_RESOLUTION.min(s.plan.resolution);
-    let screening = screen_resolution < s.plan.resolution;
-    let t = &s.targeting;
-    search(
-        &t.targets,
-        t.max_candidates,
-        screening,
-        |attempt| {
-            ensure!(!s.cancel.load(Ordering::Relaxed), "cancelled");
-            let spec = ShapeSpec {
-                resolution: screen_resolution,
-                ..force_anchors(t.spec(&s.plan, index, attempt), &s.anchors)
-            };
-            let shape = s.engine.generate_shape(&s.model_dir, &spec, &s.cancel)?;
-            Ok(measure_mm(&shape))
-        },
-        |attempt| {
-            ensure!(!s.cancel.load(Ordering::Relaxed), "cancelled");
-            let spec = force_anchors(t.spec(&s.plan, index, attempt), &s.anchors);
-            let candidate = Candidate {
-                attempt,
-                ..draw(&*s.engine, &s.model_dir, spec, &s.reference, &s.cancel)?
-            };
-            let anatomy = measure_mm(&candidate.shape);
-            let novelty = candidate.novelty.chamfer;
-            Ok(Measured {
-                candidate,
-                anatomy,
-                accept: s.min_novelty.is_none_or(|m| novelty >= m),
-                rank: novelty,
-            })
-        },
-    )
+/// The candidates of one shape of a targeted cohort.
+struct ShapeCandidates<'a> {
+    s: &'a ShapeSearch,
+    index: u64,
+}
+
+impl CandidateSource for ShapeCandidates<'_> {
+    type Spec = ShapeSpec;
+    type Kept = Candidate;
+    type Error = anyhow::Error;
+
+    fn draw(&mut self, attempt: u32) -> anyhow::Result<ShapeSpec> {
+        let s = self.s;
+        let spec = s.targeting.spec(&s.plan, self.index, attempt);
+        Ok(force_anchors(spec, &s.anchors))
+    }
+
+    fn refine(&mut self, spec: &ShapeSpec, measured: &ShapeAnatomy) -> Option<ShapeSpec> {
+        self.s.targeting.refine(&self.s.plan, spec, measured)
+    }
+
+    fn screen(&mut self, spec: &ShapeSpec) -> anyhow::Result<Result<ShapeAnatomy, String>> {
+        let s = self.s;
+        ensure!(!s.cancel.load(Ordering::Relaxed), "cancelled");
+        let spec = ShapeSpec {
+            resolution: SCREEN_RESOLUTION.min(s.plan.resolution),
+            ..spec.clone()
+        };
+        let shape = s.engine.generate_shape(&s.model_dir, &spec, &s.cancel)?;
+        Ok(measure_mm(&shape))
+    }
+
+    fn finalize(&mut self, attempt: u32, spec: &ShapeSpec) -> anyhow::Result<Measured<Candidate>> {
+        let s = self.s;
+        ensure!(!s.cancel.load(Ordering::Relaxed), "cancelled");
+        let candidate = Candidate {
+            attempt,
+            ..draw(
+                &*s.engine,
+                &s.model_dir,
+                spec.clone(),
+                &s.reference,
+                &s.cancel,
+            )?
+        };
+        let anatomy = measure_mm(&candidate.shape);
+        let novelty = candidate.novelty.chamfer;
+        Ok(Measured {
+            candidate,
+            anatomy,
+            accept: s.min_novelty.is_none_or(|m| novelty >= m),
+            rank: novelty,
+        })
+    }
 }

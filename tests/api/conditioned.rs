@@ -237,6 +237,43 @@ async fn a_feasible_target_is_met_by_every_shape_and_reported() {
 }
 
 #[tokio::test]
+async fn drawn_weights_are_refined_into_a_narrow_target_and_fixed_weights_are_kept() {
+    let app = spawn_app().await;
+    let mut lengths = training_lengths();
+    lengths.sort_by(f64::total_cmp);
+    // A 1 mm band between two training shapes: a plain draw lands in it about one time in
+    // ten, a refinement of a mixture that spans it almost always.
+    let mid = (lengths[1] + lengths[2]) / 2.0;
+    let (lo, hi) = (mid - 0.5, mid + 0.5);
+    let targets = json!({ "length_mm": { "min": lo, "max": hi } });
+    let body = cohort_body_with(json!({ "count": 6, "targets": targets, "max_candidates": 5 }));
+    let id = app.create_cohort_ok(&body).await;
+    app.run_pending_jobs().await;
+    let c = app.get(&format!("/v1/cohorts/{id}")).await.json();
+    assert_eq!(c["targets_not_met"].as_i64(), Some(0), "{c}");
+    for s in app.shape_details(id).await {
+        let length = s["anatomy"]["length_mm"].as_f64().unwrap();
+        assert!((lo..=hi).contains(&length), "{s}");
+        let weights: Vec<f64> = serde_json::from_value(s["provenance"]["weights"].clone()).unwrap();
+        let sum: f64 = weights.iter().sum();
+        assert!(
+            (sum - 1.0).abs() < 1e-9 && weights.iter().all(|&w| w >= 0.0),
+            "{s}"
+        );
+    }
+
+    // Weights the request fixes are never refined: the search only redraws the shapes.
+    let fixed = cohort_body_with(json!({
+        "count": 3, "targets": targets, "max_candidates": 3, "weights": [0.7, 0.3]
+    }));
+    let id = app.create_cohort_ok(&fixed).await;
+    app.run_pending_jobs().await;
+    for s in app.shape_details(id).await {
+        assert_eq!(s["provenance"]["weights"], json!([0.7, 0.3]), "{s}");
+    }
+}
+
+#[tokio::test]
 async fn an_unmet_target_is_searched_to_the_bound_and_the_closest_shape_is_flagged() {
     let app = spawn_app().await;
     let lengths = training_lengths();

@@ -59,8 +59,10 @@ pub struct CreateCohort {
     /// Target ranges (mm) of anatomical measurements, keyed by name: `annulus_mm`,
     /// `sinus_mm`, `stj_mm`, `sinus_height_mm`, `ascending_mm`, `length_mm`,
     /// `max_diameter_mm`; each `{"min": …, "max": …}` with at least one bound, both ≥ 0.
-    /// Each shape then searches up to `max_candidates` mixtures for one inside every range;
-    /// when none is, the closest is kept and flagged `targets_met: false`. A target outside
+    /// Each shape then searches up to `max_candidates` mixtures for one inside every range:
+    /// fresh draws, and (when the weights are drawn, not given or `equal`) refinements of a
+    /// missing draw's weights predicted from the training shapes' measurements. When none
+    /// is inside, the closest is kept and flagged `targets_met: false`. A target outside
     /// what the model's training shapes reach (their range widened by 5 % of the largest
     /// value) is refused with the achievable range.
     #[serde(default, skip_serializing_if = "Option::is_none")]
