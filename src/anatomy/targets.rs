@@ -1072,12 +1072,17 @@ mod tests {
             refine_weights(&t, &training, &[0, 1], &[0.5, 0.5], &vessel),
             None
         );
-        // Both parts' annuli (20 and 30 mm) lie above 19 mm: no weights can reach it.
+        // Both parts' annuli (20 and 30 mm) lie above 19 mm and the mixture measured as
+        // predicted (25 mm): no weights can reach it.
         let below = targets(&[("annulus_mm", None, Some(19.0))]).unwrap();
         assert_eq!(
-            refine_weights(&below, &training, &[0, 1], &[0.5, 0.5], &outside),
+            refine_weights(&below, &training, &[0, 1], &[0.5, 0.5], &inside),
             None
         );
+        // Measured 5 mm below the prediction, the same mixture can: all weight on part 0.
+        let low = anatomy(Some(20.0), 70.0);
+        let w = refine_weights(&below, &training, &[0, 1], &[0.5, 0.5], &low).unwrap();
+        assert!(annulus_of(&w) - 5.0 <= 19.0 && w[0] > 0.5, "{w:?}");
     }
 
     #[test]
