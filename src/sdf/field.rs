@@ -3,12 +3,14 @@
 //! The latent's contribution to layer 0 and to the skip layer (`z·W_z + b`) is computed once
 //! when the field is built; each evaluation then only multiplies the points' own activations.
 //! Points are processed in chunks so memory stays bounded for dense grids. With f32 weights
-//! on the Flex backend the host forward pass of [`super::infer`] does the work (fused
-//! softplus, parallel chunks); otherwise the tensor forward of [`SdfNetwork::evaluate`].
+//! the host forward pass of [`super::kernel`] does the work (on any backend: it reads the
+//! weights once); otherwise burn's composition of tensor operations
+//! ([`SdfNetwork::evaluate_composed`]).
 
 use burn::module::Module;
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::{DType, Tensor, TensorData};
 
+use super::kernel::{KernelShape, Network};
 use super::network::{LatentOffsets, SdfNetwork};
 
 /// Points per network evaluation: large enough for efficient matrix products, small enough
@@ -44,8 +46,50 @@ pub struct SdfField {
     network: SdfNetwork,
     offsets: LatentOffsets,
     chunk_points: usize,
-    #[cfg(feature = "flex")]
-    host: Option<super::infer::HostForward>,
+    host: Option<HostNetwork>,
+}
+
+/// The network and one shape's offsets as host values, for the forward pass of
+/// [`super::kernel`].
+#[derive(Debug, Clone)]
+struct HostNetwork {
+    shape: KernelShape,
+    params: Vec<f32>,
+    first: Vec<f32>,
+    skip: Vec<f32>,
+}
+
+impl HostNetwork {
+    fn new(network: &SdfNetwork, offsets: &LatentOffsets) -> Self {
+        Self {
+            shape: network.kernel_shape(),
+            params: to_f32(network.kernel_parameters()),
+            first: to_f32(offsets.first.clone()),
+            skip: to_f32(offsets.skip.clone()),
+        }
+    }
+
+    /// f into `values` and, when given, ∇ₓf into `gradients` (one shape: one offset group).
+    fn eval(&self, points: &[[f32; 3]], values: &mut [f32], gradients: Option<&mut [[f32; 3]]>) {
+        let net = Network::new(&self.shape, &self.params, &self.first, &self.skip, 1)
+            .expect("host network built from the model");
+        let x = points.as_flattened();
+        let run = |out: &mut [f32], with_gradient| {
+            net.forward(x, with_gradient, out, None)
+                .expect("buffers sized by the caller");
+        };
+        match gradients {
+            None => run(values, false),
+            Some(gradients) => {
+                let mut out = vec![0.0f32; 4 * points.len()];
+                run(&mut out, true);
+                for ((o, v), g) in out.chunks_exact(4).zip(values).zip(gradients) {
+                    *v = o[0];
+                    *g = [o[1], o[2], o[3]];
+                }
+            }
+        }
+    }
 }
 
 impl SdfField {
@@ -64,40 +108,26 @@ impl SdfField {
             (&network.device(), network.dtype()),
         );
         let offsets = network.latent_offsets(z);
-        #[cfg(feature = "flex")]
-        let host = (super::infer::supported(&network)
-            && network.device() == burn::tensor::Device::flex())
-        .then(|| super::infer::HostForward::new(&network, &offsets));
+        let host = (network.dtype() == DType::F32).then(|| HostNetwork::new(&network, &offsets));
         Ok(Self {
             network,
             offsets,
             chunk_points: DEFAULT_CHUNK_POINTS,
-            #[cfg(feature = "flex")]
             host,
         })
     }
 
-    /// Evaluates through the tensor forward pass even where the host pass applies (the
-    /// reference the host pass is checked against).
-    #[cfg_attr(not(feature = "flex"), allow(unused_mut))]
+    /// Evaluates through burn's composition of tensor operations
+    /// ([`SdfNetwork::evaluate_composed`]) even where the host pass applies: the reference
+    /// the host pass is checked against.
     pub fn with_tensor_forward(mut self) -> Self {
-        #[cfg(feature = "flex")]
-        {
-            self.host = None;
-        }
+        self.host = None;
         self
     }
 
     /// Whether evaluations run on the host forward pass.
     pub fn uses_host_forward(&self) -> bool {
-        #[cfg(feature = "flex")]
-        {
-            self.host.is_some()
-        }
-        #[cfg(not(feature = "flex"))]
-        {
-            false
-        }
+        self.host.is_some()
     }
 
     /// Sets the number of points per network call (at least 1).
@@ -130,9 +160,12 @@ impl SdfField {
                 points: n,
             });
         }
-        #[cfg(feature = "flex")]
         if let Some(host) = &self.host {
-            host.eval(points, values, gradients);
+            for (c, chunk) in points.chunks(self.chunk_points).enumerate() {
+                let rows = c * self.chunk_points..c * self.chunk_points + chunk.len();
+                let g = gradients.as_deref_mut().map(|g| &mut g[rows.clone()]);
+                host.eval(chunk, &mut values[rows], g);
+            }
             return Ok(());
         }
         let (device, dtype) = (self.network.device(), self.network.dtype());
@@ -141,7 +174,9 @@ impl SdfField {
             let flat: Vec<f32> = chunk.iter().flatten().copied().collect();
             let x =
                 Tensor::<2>::from_data(TensorData::new(flat, [chunk.len(), 3]), (&device, dtype));
-            let out = self.network.evaluate(&self.offsets, x, gradients.is_some());
+            let out = self
+                .network
+                .evaluate_composed(&self.offsets, x, gradients.is_some());
             let f = to_f32(out.values);
             values[start..start + chunk.len()].copy_from_slice(&f);
             if let (Some(dst), Some(g)) = (gradients.as_deref_mut(), out.gradients) {
@@ -173,7 +208,7 @@ impl SdfField {
     }
 }
 
-fn to_f32(t: Tensor<2>) -> Vec<f32> {
+fn to_f32<const D: usize>(t: Tensor<D>) -> Vec<f32> {
     t.into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()

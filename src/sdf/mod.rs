@@ -4,11 +4,14 @@
 //! - [`network`]: the DeepSDF/IGR MLP and its explicit input gradient ∇ₓf.
 //! - [`fused`], [`softplus`]: the fused softplus and reverse-pass gate of a hidden layer, with
 //!   their own backward (a burn backend extension over host loops).
+//! - [`kernel`], [`network_op`]: the whole network (f, ∇ₓf and the backward of a loss on
+//!   them) as one burn operation over host passes that keep chunks of points in cache.
+//! - [`product`]: matrix products through gemm into caller-owned buffers; [`buffers`]: host
+//!   buffers those passes reuse from step to step.
 //! - [`decoder`]: network + per-shape latent table.
 //! - [`loss`]: the IGR loss over a [`TrainingBatch`].
 //! - [`step`]: one Adam step ([`SdfTrainer`]).
 //! - [`field`]: fast evaluation of f and ∇f for one latent over many points.
-//! - `infer`: the inference-only host forward pass behind [`field`] (Flex backend).
 //! - [`data`], [`cache`], [`batch`]: training shapes, their one-off samples, reproducible batches.
 //! - [`config`], [`training`], [`manifest`], [`store`]: the training loop and saved models.
 //! - [`reconstruct`], [`evaluation`], [`generate`]: meshes, fidelity and new shapes from latents.
@@ -16,13 +19,15 @@
 //! Sign convention: f < 0 inside, f > 0 outside (forced by the loss with outward normals).
 
 pub mod backend;
+pub mod buffers;
 pub mod decoder;
 pub mod field;
 pub mod fused;
-#[cfg(feature = "flex")]
-pub mod infer;
+pub mod kernel;
 pub mod loss;
 pub mod network;
+pub mod network_op;
+pub mod product;
 pub mod softplus;
 pub mod step;
 

@@ -28,6 +28,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::fused::{gate, softplus_offset};
+use super::kernel::KernelShape;
+use super::network_op::{self, NetworkSpec};
 
 /// Architecture and initialisation of the SDF network (defaults: the paper's configuration).
 #[derive(Config, Debug)]
@@ -305,10 +307,89 @@ impl SdfNetwork {
     /// f (and ∇ₓf if `with_gradient`) at `points` `[S·P, 3]`, grouped by shape in the order of
     /// the offsets' rows (P points per shape).
     ///
-    /// Each hidden layer is a matrix product followed by one fused `softplus_offset` (which
-    /// adds the bias, or the shape's latent offset); the reverse pass reuses the layers'
-    /// pre-activations through the fused `gate`.
+    /// The whole network is one burn operation with its own backward ([`network_op`]) for
+    /// f32 and f64 parameters and constant points; otherwise (other dtypes, or points that
+    /// require a gradient) the composition of [`Self::evaluate_composed`].
     pub fn evaluate(
+        &self,
+        offsets: &LatentOffsets,
+        points: Tensor<2>,
+        with_gradient: bool,
+    ) -> SdfOutput {
+        if !network_op::supports(self.dtype()) || points.is_tracked() {
+            return self.evaluate_composed(offsets, points, with_gradient);
+        }
+        let spec = NetworkSpec {
+            shape: self.kernel_shape(),
+            with_gradient,
+        };
+        let out = network_op::network(
+            points,
+            offsets.first.clone(),
+            offsets.skip.clone(),
+            self.kernel_parameters(),
+            spec,
+        );
+        let gradients = with_gradient.then(|| out.clone().narrow(1, 1, 3));
+        SdfOutput {
+            values: if with_gradient {
+                out.narrow(1, 0, 1)
+            } else {
+                out
+            },
+            gradients,
+        }
+    }
+
+    /// The network's sizes as the host kernel sees them.
+    pub fn kernel_shape(&self) -> KernelShape {
+        let last = self.layers.len() - 1;
+        KernelShape {
+            widths: (0..last).map(|l| self.layers[l].weight.dims()[1]).collect(),
+            skip: self.skip_layer,
+            beta: self.beta,
+        }
+    }
+
+    /// The kernel's flat parameter vector (blocks in the order of
+    /// [`KernelShape::param_blocks`]), built from the layers by differentiable burn operations
+    /// so that its gradient reaches every `Param`.
+    pub fn kernel_parameters(&self) -> Tensor<1> {
+        let d = self.latent_dim;
+        let flat = |t: Tensor<2>| {
+            let [r, c] = t.dims();
+            t.reshape([r * c])
+        };
+        let bias = |l: usize| {
+            self.layers[l]
+                .bias
+                .as_ref()
+                .expect("SDF layers have biases")
+                .val()
+        };
+        let last = self.layers.len() - 1;
+        let mut parts = vec![flat(self.layers[0].weight.val().narrow(0, d, 3))];
+        for l in 1..last {
+            if l == self.skip_layer {
+                let c = self.activation_inputs(l);
+                let w = self.skip_weight();
+                parts.push(flat(w.clone().narrow(0, 0, c)));
+                parts.push(flat(w.narrow(0, c + d, 3)));
+            } else {
+                parts.push(flat(self.layers[l].weight.val()));
+                parts.push(bias(l));
+            }
+        }
+        parts.push(flat(self.layers[last].weight.val()));
+        parts.push(bias(last));
+        Tensor::cat(parts, 0)
+    }
+
+    /// [`Self::evaluate`] as a composition of burn operations: each hidden layer a matrix
+    /// product followed by one fused `softplus_offset` (which adds the bias, or the shape's
+    /// latent offset); the reverse pass reuses the layers' pre-activations through the fused
+    /// `gate`. The reference the network operation is tested against.
+    pub fn evaluate_composed(
         &self,
         offsets: &LatentOffsets,
         points: Tensor<2>,
@@ -530,6 +611,77 @@ mod tests {
                     (fd - an).abs() <= 1e-6 * (1.0 + fd.abs()),
                     "d={latent_dim} H={hidden} point {i} axis {k}: analytic {an} vs FD {fd}"
                 );
+            }
+        }
+    }
+
+    /// The network operation (one burn operation with its own backward) against the
+    /// composition of burn operations it replaces, on every compiled backend, in f64 and f32:
+    /// f, ∇ₓf, and the gradient of a loss nonlinear in both with respect to every parameter
+    /// and the latents, for a network wider than its input and one that is not.
+    #[test]
+    fn network_operation_equals_the_composed_network_with_all_gradients() {
+        use crate::sdf::SdfAutoDecoder;
+        use burn::optim::GradientsParams;
+
+        for backend in Backend::ALL.into_iter().filter(|b| b.is_compiled()) {
+            let device = backend.device(true).unwrap();
+            for (dtype, tol) in [(DType::F64, 1e-10), (DType::F32, 2e-4)] {
+                for (latent_dim, hidden) in [(8, 32), (8, 10)] {
+                    let label = format!("{backend} {dtype:?} d={latent_dim} H={hidden}");
+                    let config = SdfNetworkConfig::new()
+                        .with_latent_dim(latent_dim)
+                        .with_hidden(hidden);
+                    let model =
+                        SdfAutoDecoder::new_with_dtype(&config, 4, 3, &device, dtype).unwrap();
+                    let model = perturbed(model, 4, 0.1);
+                    let (shapes, per_shape) = (3, 40);
+                    let points = random_points(shapes * per_shape, 0.9, 5);
+                    let a = tensor2(&random_points(shapes * per_shape, 1.0, 6), &device, dtype)
+                        .narrow(1, 0, 1);
+                    let b = tensor2(&random_points(shapes * per_shape, 1.0, 7), &device, dtype);
+                    let run = |composed: bool| {
+                        let latents = model.gather_latents(&[2, 0, 3]);
+                        let offsets = model.network.latent_offsets(latents);
+                        let x = tensor2(&points, &device, dtype);
+                        let out = if composed {
+                            model.network.evaluate_composed(&offsets, x, true)
+                        } else {
+                            model.network.evaluate(&offsets, x, true)
+                        };
+                        let g = out.gradients.unwrap();
+                        let loss = (out.values.clone() * a.clone()).sum()
+                            + (g.clone().square() * b.clone()).sum();
+                        let grads = GradientsParams::from_grads(loss.backward(), &model);
+                        (to_f64(out.values), to_f64(g), grads)
+                    };
+                    let (f_op, g_op, grads_op) = run(false);
+                    let (f_ref, g_ref, grads_ref) = run(true);
+                    let close = |what: &str, got: &[f64], want: &[f64]| {
+                        assert_eq!(got.len(), want.len(), "{label} {what}: sizes");
+                        let scale = want.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                        for (i, (x, y)) in got.iter().zip(want).enumerate() {
+                            assert!(
+                                (x - y).abs() <= tol * scale,
+                                "{label} {what}[{i}]: operation {x} vs composed {y}"
+                            );
+                        }
+                    };
+                    close("f", &f_op, &f_ref);
+                    close("∇f", &g_op, &g_ref);
+                    let mut ids = vec![("latents".to_string(), model.latents.id)];
+                    for (l, layer) in model.network.layers.iter().enumerate() {
+                        ids.push((format!("layer{l}.weight"), layer.weight.id));
+                        ids.push((format!("layer{l}.bias"), layer.bias.as_ref().unwrap().id));
+                    }
+                    for (name, id) in ids {
+                        let get = |g: &GradientsParams| match name.as_str() {
+                            n if n.ends_with("bias") => to_f64(g.get::<1>(id).expect("∂bias")),
+                            _ => to_f64(g.get::<2>(id).expect("∂weight")),
+                        };
+                        close(&name, &get(&grads_op), &get(&grads_ref));
+                    }
+                }
             }
         }
     }

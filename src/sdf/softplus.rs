@@ -1,6 +1,7 @@
 //! Softplus_β and its slope σ(βy) on host slices: branch-free scalar approximations the
-//! compiler vectorises, and the fused per-layer loops behind the training operations of
-//! [`super::fused`] and the inference pass of `infer`.
+//! compiler vectorises, and the fused per-layer loops behind the operations of
+//! [`super::fused`] (the composed network, the reference for [`super::kernel`], which uses
+//! the same scalar functions).
 //!
 //! A hidden layer's pre-activation is `pre + offset`, where `offset` has one row per group of
 //! consecutive rows (the per-shape latent offsets of layer 0 and of the skip layer, with
