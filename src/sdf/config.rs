@@ -7,12 +7,13 @@
 //!
 //! `cpu` is the CPU preset: a model small enough to train on a 2-core machine in an hour or
 //! so for ~100 shapes. d = 64, H = 128 is the smallest of the measured configurations
-//! (BURN_CPU.md, config c: ≈ 17 000 surface points per second per training step, 9× config a);
-//! 100 000 cached points per shape keep σ_local meaningful at a tenth of the paper's memory;
-//! 2 048 + 2 048 points per shape per step and 8 shapes per batch keep one step near a second.
-//! Measured on 100 SynthAorta shapes (release build, 2-core machine, docs/synthaorta-100):
-//! 240 epochs in 25.5 min with nothing else running (≈ 6.3 s per epoch after ≈ 20 s of
-//! one-off sampling); reconstruction CD median 5.6e-5 against a sampling floor of 4.9e-5.
+//! (config c of the benchmarks: ≈ 58 000 surface points per second per training step, 11×
+//! config a); 100 000 cached points per shape keep σ_local meaningful at a tenth of the
+//! paper's memory; 2 048 + 2 048 points per shape per step and 8 shapes per batch keep one
+//! step under half a second. Measured on 100 SynthAorta shapes (release build, 2-core
+//! machine, docs/synthaorta-100): 240 epochs in 15 min with nothing else running (≈ 3.6 s per
+//! epoch after ≈ 20 s of one-off sampling); reconstruction CD median 5.8e-5 against a sampling
+//! floor of 4.9e-5.
 //! The learning rate halves every 80 epochs (three halvings, as the paper's schedule has ten
 //! over 5000 epochs, scaled to the shorter run); the loss reaches its final value by epoch 180.
 
