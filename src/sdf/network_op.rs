@@ -182,7 +182,8 @@ mod host {
                 .unwrap_or_else(|e| panic!("network operation: {e}"))
         }
 
-        fn rows(&self) -> usize {
+        /// Number of points.
+        pub fn rows(&self) -> usize {
             self.0[0].len() / 3
         }
 
@@ -213,10 +214,6 @@ mod host {
             self.network(spec)
                 .backward(&self.0[0], spec.with_gradient, grad, E::unwrap(saved))
                 .unwrap_or_else(|e| panic!("network operation: {e}"))
-        }
-
-        pub fn rows_of(&self) -> usize {
-            self.rows()
         }
     }
 }
@@ -265,7 +262,7 @@ macro_rules! host_backed {
                     save: bool,
                 ) -> (FloatTensor<$backend>, Option<Saved>) {
                     let host = host::Inputs(inputs.map(|t| $values::<E>(t)));
-                    let rows = host.rows_of();
+                    let rows = host.rows();
                     let (out, saved) = host.forward(spec, save);
                     let cols = KernelShape::output_cols(spec.with_gradient);
                     ($tensor(out, vec![rows, cols]), saved)
