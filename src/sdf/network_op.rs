@@ -58,17 +58,8 @@ pub trait NetworkOps: Backend {
 /// The saving forward and the backward of [`NetworkOps::network`] on a backend that runs the
 /// host passes (what `Autodiff` needs of its inner backend).
 pub trait NetworkKernelOps: Backend {
-    /// The forward output and the values saved for the backward.
-    fn network_saving(
-        points: FloatTensor<Self>,
-        first: FloatTensor<Self>,
-        skip: FloatTensor<Self>,
-        params: FloatTensor<Self>,
-        spec: &NetworkSpec,
-    ) -> (FloatTensor<Self>, Saved);
-
     /// The forward output and, when `save`, the values saved for the backward.
-    fn forward(
+    fn network_forward(
         points: FloatTensor<Self>,
         first: FloatTensor<Self>,
         skip: FloatTensor<Self>,
@@ -230,25 +221,15 @@ macro_rules! host_backed {
                 params: FloatTensor<Self>,
                 spec: NetworkSpec,
             ) -> FloatTensor<Self> {
-                <$backend as NetworkKernelOps>::forward(points, first, skip, params, &spec, false).0
+                let (out, _) = <$backend as NetworkKernelOps>::network_forward(
+                    points, first, skip, params, &spec, false,
+                );
+                out
             }
         }
 
         impl NetworkKernelOps for $backend {
-            fn network_saving(
-                points: FloatTensor<Self>,
-                first: FloatTensor<Self>,
-                skip: FloatTensor<Self>,
-                params: FloatTensor<Self>,
-                spec: &NetworkSpec,
-            ) -> (FloatTensor<Self>, Saved) {
-                let (out, saved) = <$backend as NetworkKernelOps>::forward(
-                    points, first, skip, params, spec, true,
-                );
-                (out, saved.expect("saved values"))
-            }
-
-            fn forward(
+            fn network_forward(
                 points: FloatTensor<Self>,
                 first: FloatTensor<Self>,
                 skip: FloatTensor<Self>,
@@ -408,9 +389,7 @@ struct BackwardState<B: Backend> {
     saved: Saved,
 }
 
-impl<B: Backend + NetworkKernelOps + NetworkOps, C: CheckpointStrategy> NetworkOps
-    for Autodiff<B, C>
-{
+impl<B: Backend + NetworkKernelOps, C: CheckpointStrategy> NetworkOps for Autodiff<B, C> {
     fn network(
         points: FloatTensor<Self>,
         first: FloatTensor<Self>,
@@ -431,13 +410,15 @@ impl<B: Backend + NetworkKernelOps + NetworkOps, C: CheckpointStrategy> NetworkO
             .stateful()
         {
             OpsKind::Tracked(prep) => {
-                let (out, saved) = B::network_saving(
+                let (out, saved) = B::network_forward(
                     points.clone(),
                     first.clone(),
                     skip.clone(),
                     params.clone(),
                     &spec,
+                    true,
                 );
+                let saved = saved.expect("a saving forward pass returns its saved values");
                 let state = BackwardState {
                     points,
                     first,
@@ -447,7 +428,10 @@ impl<B: Backend + NetworkKernelOps + NetworkOps, C: CheckpointStrategy> NetworkO
                 };
                 prep.finish((state, spec), out)
             }
-            OpsKind::UnTracked(prep) => prep.finish(B::network(points, first, skip, params, spec)),
+            OpsKind::UnTracked(prep) => {
+                let (out, _) = B::network_forward(points, first, skip, params, &spec, false);
+                prep.finish(out)
+            }
         }
     }
 }
