@@ -5,7 +5,8 @@
 //! them is mapped and cleared by the kernel on first write: about an eighth of a step
 //! (`clear_page_erms` under gemm's stores, measured with `perf`). A [`Buffer`] goes back to a
 //! small per-type pool when dropped and the next request of at most its capacity takes it
-//! again, already mapped.
+//! again, already mapped. A training run frees what it leaves in the pools when it ends
+//! ([`release_free_buffers`], called when an `SdfTrainer` is dropped).
 
 use std::ops::{Deref, DerefMut};
 use std::sync::Mutex;
@@ -57,6 +58,14 @@ impl Pooled for f64 {
     }
 }
 
+/// Frees the kept buffers of every element type: what a finished training run leaves behind
+/// (its saved values alone can be a gigabyte), so that a long-running process does not hold
+/// them until the next run.
+pub fn release_free_buffers() {
+    f32::pool().release();
+    f64::pool().release();
+}
+
 /// A vector that returns to its pool when dropped.
 #[derive(Debug)]
 pub struct Buffer<E: HostFloat + 'static> {
@@ -97,6 +106,16 @@ impl<E: HostFloat> Pool<E> {
         values.truncate(len);
         values.resize(len, E::ZERO);
         Buffer { values, pool: self }
+    }
+
+    /// Frees every kept buffer (those in use are unaffected and return later).
+    pub fn release(&self) {
+        self.free.lock().unwrap_or_else(|e| e.into_inner()).clear();
+    }
+
+    /// How many free buffers the pool keeps.
+    pub fn kept(&self) -> usize {
+        self.free.lock().unwrap_or_else(|e| e.into_inner()).len()
     }
 
     fn give_back(&self, values: Vec<E>) {
@@ -156,6 +175,10 @@ mod tests {
         assert_ne!(c.as_ptr(), ptr, "a buffer in use is never handed out twice");
         let big = POOL.take(5000);
         assert_eq!(big.len(), 5000);
+        drop((b, c, big));
+        assert_eq!(POOL.kept(), 3);
+        POOL.release();
+        assert_eq!(POOL.kept(), 0);
     }
 
     #[test]

@@ -72,6 +72,7 @@ pub struct SdfTrainer {
     model: Option<SdfAutoDecoder>,
     optimizer: ModuleOptimizer,
     config: TrainStepConfig,
+    _buffers: ReleaseBuffersOnDrop,
 }
 
 impl SdfTrainer {
@@ -86,6 +87,7 @@ impl SdfTrainer {
             model: Some(model),
             optimizer,
             config,
+            _buffers: ReleaseBuffersOnDrop,
         }
     }
 
@@ -99,6 +101,7 @@ impl SdfTrainer {
             model: Some(model),
             optimizer,
             config,
+            _buffers: ReleaseBuffersOnDrop,
         }
     }
 
@@ -136,6 +139,18 @@ impl SdfTrainer {
         let grads = GradientsParams::from_grads(terms.total.backward(), &model);
         self.model = Some(self.optimizer.step(lr, model, grads));
         Ok(output)
+    }
+}
+
+/// Frees the pooled host buffers when the trainer holding it goes: the network operation's
+/// saved values and scratch stay pooled between steps, and once a run ends they are freed
+/// instead of staying with the process.
+#[derive(Debug, Default)]
+struct ReleaseBuffersOnDrop;
+
+impl Drop for ReleaseBuffersOnDrop {
+    fn drop(&mut self) {
+        super::buffers::release_free_buffers();
     }
 }
 
