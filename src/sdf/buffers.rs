@@ -91,6 +91,13 @@ impl<E: Pooled> Buffer<E> {
 impl<E: HostFloat> Pool<E> {
     /// A buffer of `len` values from this pool (unspecified contents), or a new one.
     pub fn take(&'static self, len: usize) -> Buffer<E> {
+        if len == 0 {
+            // Nothing to reuse: a kept buffer stays for a request that needs it.
+            return Buffer {
+                values: Vec::new(),
+                pool: self,
+            };
+        }
         let recycled = {
             let mut free = self.free.lock().unwrap_or_else(|e| e.into_inner());
             // The smallest kept buffer that is large enough.
@@ -177,6 +184,9 @@ mod tests {
         assert_eq!(big.len(), 5000);
         drop((b, c, big));
         assert_eq!(POOL.kept(), 3);
+        let empty = POOL.take(0);
+        assert!(empty.is_empty());
+        assert_eq!(POOL.kept(), 3, "an empty request leaves the kept buffers");
         POOL.release();
         assert_eq!(POOL.kept(), 0);
     }

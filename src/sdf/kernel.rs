@@ -14,7 +14,7 @@
 //! softplus_β(y_l)`, `s_l = σ(βy_l)`; `f = h_{L−1}·w + b`. The reverse pass for ∇ₓf:
 //! `δ_{L−1} = s_{L−1} ⊙ w`, `t_l = δ_l·W_lᵀ`, `δ_{l−1} = s_{l−1} ⊙ t_l`, and ∇ₓf collects
 //! `δ_0·W_xᵀ` of layer 0 and `δ_skip·W_xᵀ` of the skip layer. What the backward needs is saved:
-//! every `y_l` and `t_l` (h and s are recomputed from y).
+//! every `h_l`, `s_l` and `t_l`, so the backward evaluates no softplus.
 //!
 //! **Backward**, for output gradients `G_f` (∂L/∂f) and `G_g` (∂L/∂∇ₓf): first upwards through
 //! the reverse pass with `ε_l = ∂L/∂δ_l` (`ε_0 = G_g·W_x`, `∂t_l = ε_{l−1} ⊙ s_{l−1}`,
@@ -176,38 +176,50 @@ impl KernelShape {
     }
 }
 
-/// Where each matrix of a chunk lies in the chunk's slab of saved values: all h_l, then all
-/// s_l, then all t_l (l ≥ 1), each `[rows, width]`.
-struct SlabLayout {
-    rows: usize,
+/// Per-row starts of the matrices in a chunk's slab of saved values, computed once per pass.
+#[derive(Debug, Clone)]
+struct SlabStarts {
     /// Per-row start of each layer within the h and s blocks (and the total width).
     layers: Vec<usize>,
     /// Per-row start of each t_l (index l − 1) within the t block.
     t: Vec<usize>,
 }
 
-impl SlabLayout {
-    fn new(shape: &KernelShape, rows: usize) -> Self {
+impl SlabStarts {
+    fn new(shape: &KernelShape) -> Self {
         Self {
-            rows,
             layers: prefix_sums(&shape.widths),
             t: prefix_sums(&shape.widths[..shape.layers() - 1]),
         }
     }
 
+    /// The layout of a chunk of `rows` rows.
+    fn for_rows(&self, rows: usize) -> SlabLayout<'_> {
+        SlabLayout { rows, starts: self }
+    }
+}
+
+/// Where each matrix of a chunk lies in the chunk's slab of saved values: all h_l, then all
+/// s_l, then all t_l (l ≥ 1), each `[rows, width]`.
+struct SlabLayout<'p> {
+    rows: usize,
+    starts: &'p SlabStarts,
+}
+
+impl SlabLayout<'_> {
     /// Values of the h block (and of the s block).
     fn block(&self) -> usize {
-        self.rows * self.layers[self.layers.len() - 1]
+        self.rows * self.starts.layers[self.starts.layers.len() - 1]
     }
 
     /// Layer l's matrix within the h or the s block.
     fn layer(&self, l: usize) -> Range<usize> {
-        self.rows * self.layers[l]..self.rows * self.layers[l + 1]
+        self.rows * self.starts.layers[l]..self.rows * self.starts.layers[l + 1]
     }
 
     /// t_l (l ≥ 1) within the t block.
     fn t(&self, l: usize) -> Range<usize> {
-        self.rows * self.t[l - 1]..self.rows * self.t[l]
+        self.rows * self.starts.t[l - 1]..self.rows * self.starts.t[l]
     }
 
     /// The slab as (h block, s block, t block).
@@ -372,6 +384,7 @@ impl<'a, E: KernelFloat> Network<'a, E> {
             });
         }
         let c = self.chunk_rows;
+        let saving = saved.is_some();
         let saved_chunks: Vec<Option<&mut [E]>> = match saved {
             Some(s) => s.chunks_mut(c * per_row).map(Some).collect(),
             None => (0..rows.div_ceil(c)).map(|_| None).collect(),
@@ -388,14 +401,10 @@ impl<'a, E: KernelFloat> Network<'a, E> {
                 saved,
             })
             .collect();
-        let kernel = Pass {
-            net: self,
-            with_gradient,
-            layout: self.shape.param_layout(),
-            group_rows: rows / self.groups,
-        };
+        let kernel = self.pass(with_gradient, rows);
+        let slab = !saving;
         jobs.into_par_iter().for_each_init(
-            || Scratch::new(self.shape, c),
+            || ForwardScratch::new(self.shape, c, slab),
             |scratch, job| run_vectorized(&kernel, job.first_row, (job, scratch)),
         );
         Ok(())
@@ -427,12 +436,7 @@ impl<'a, E: KernelFloat> Network<'a, E> {
         }
         let c = self.chunk_rows;
         let chunks = rows.div_ceil(c);
-        let kernel = Pass {
-            net: self,
-            with_gradient,
-            layout: self.shape.param_layout(),
-            group_rows: rows / self.groups,
-        };
+        let kernel = self.pass(with_gradient, rows);
         let lanes: Vec<LaneSums<E>> = (0..LANES)
             .into_par_iter()
             .map(|lane| {
@@ -441,7 +445,7 @@ impl<'a, E: KernelFloat> Network<'a, E> {
                     first: Buffer::zeroed(self.first.len()),
                     skip: Buffer::zeroed(self.skip.len()),
                 };
-                let mut scratch = Scratch::new(self.shape, c);
+                let mut scratch = BackwardScratch::new(self.shape, c);
                 for k in lane * chunks / LANES..(lane + 1) * chunks / LANES {
                     let r = k * c..((k + 1) * c).min(rows);
                     let job = BackwardJob {
@@ -471,6 +475,17 @@ impl<'a, E: KernelFloat> Network<'a, E> {
         }
         Ok(total)
     }
+
+    /// The chunk passes over `rows` points.
+    fn pass(&self, with_gradient: bool, rows: usize) -> Pass<'_, 'a, E> {
+        Pass {
+            net: self,
+            with_gradient,
+            layout: self.shape.param_layout(),
+            slab: SlabStarts::new(self.shape),
+            group_rows: rows / self.groups,
+        }
+    }
 }
 
 /// One chunk of the forward pass.
@@ -496,10 +511,30 @@ struct LaneSums<E: KernelFloat> {
     skip: Buffer<E>,
 }
 
-/// Per-thread buffers of a chunk, reused from chunk to chunk (and from pass to pass).
-struct Scratch<E: KernelFloat> {
-    /// The chunk's slab when the forward pass does not save it.
-    slab: Buffer<E>,
+/// Per-thread buffers of a forward chunk, reused from chunk to chunk (and from pass to pass);
+/// every chunk writes what it reads first.
+struct ForwardScratch<E: KernelFloat> {
+    /// The chunk's slab when the pass does not save one.
+    slab: Option<Buffer<E>>,
+    /// δ_l and δ_{l−1} of the reverse pass.
+    a: Buffer<E>,
+    b: Buffer<E>,
+}
+
+impl<E: KernelFloat> ForwardScratch<E> {
+    fn new(shape: &KernelShape, rows: usize, slab: bool) -> Self {
+        let widest = shape.widths.iter().copied().max().unwrap_or(0);
+        Self {
+            slab: slab.then(|| Buffer::reused(rows * shape.saved_per_row(true))),
+            a: Buffer::reused(rows * widest),
+            b: Buffer::reused(rows * widest),
+        }
+    }
+}
+
+/// Per-thread buffers of a backward chunk, reused from chunk to chunk (and from pass to pass);
+/// every chunk writes what it reads first.
+struct BackwardScratch<E: KernelFloat> {
     /// ∂y_l of every layer.
     dy: Buffer<E>,
     /// Three matrices of the chunk's widest activation (δ, ε, ∂t, ∂h).
@@ -508,14 +543,12 @@ struct Scratch<E: KernelFloat> {
     c: Buffer<E>,
 }
 
-impl<E: KernelFloat> Scratch<E> {
-    /// Buffers for chunks of up to `rows` rows; every pass writes what it reads first.
+impl<E: KernelFloat> BackwardScratch<E> {
     fn new(shape: &KernelShape, rows: usize) -> Self {
         let all: usize = shape.widths.iter().sum();
         let widest = shape.widths.iter().copied().max().unwrap_or(0);
         let take = |n: usize| Buffer::reused(n * rows);
         Self {
-            slab: take(shape.saved_per_row(true)),
             dy: take(all),
             a: take(widest),
             b: take(widest),
@@ -529,24 +562,29 @@ struct Pass<'n, 'a, E> {
     net: &'n Network<'a, E>,
     with_gradient: bool,
     layout: ParamLayout,
+    slab: SlabStarts,
     /// Rows per offset group (points per shape).
     group_rows: usize,
 }
 
-impl<'j, E: KernelFloat> BlockKernel<(ForwardJob<'j, E>, &mut Scratch<E>)> for Pass<'_, '_, E> {
+impl<'j, E: KernelFloat> BlockKernel<(ForwardJob<'j, E>, &mut ForwardScratch<E>)>
+    for Pass<'_, '_, E>
+{
     type Output = ();
 
     #[inline(always)]
-    fn run(&self, first_row: usize, (job, scratch): (ForwardJob<'j, E>, &mut Scratch<E>)) {
+    fn run(&self, first_row: usize, (job, scratch): (ForwardJob<'j, E>, &mut ForwardScratch<E>)) {
         self.forward_chunk(first_row, job, scratch);
     }
 }
 
-impl<'j, E: KernelFloat> BlockKernel<(BackwardJob<'j, E>, &mut Scratch<E>)> for Pass<'_, '_, E> {
+impl<'j, E: KernelFloat> BlockKernel<(BackwardJob<'j, E>, &mut BackwardScratch<E>)>
+    for Pass<'_, '_, E>
+{
     type Output = ();
 
     #[inline(always)]
-    fn run(&self, first_row: usize, (job, scratch): (BackwardJob<'j, E>, &mut Scratch<E>)) {
+    fn run(&self, first_row: usize, (job, scratch): (BackwardJob<'j, E>, &mut BackwardScratch<E>)) {
         self.backward_chunk(first_row, job, scratch);
     }
 }
@@ -578,20 +616,28 @@ impl<E: KernelFloat> Pass<'_, '_, E> {
     }
 
     #[inline(always)]
-    fn forward_chunk(&self, first_row: usize, job: ForwardJob<'_, E>, scratch: &mut Scratch<E>) {
+    fn forward_chunk(
+        &self,
+        first_row: usize,
+        job: ForwardJob<'_, E>,
+        scratch: &mut ForwardScratch<E>,
+    ) {
         let shape = self.shape();
         let (w, layers, skip) = (&shape.widths, shape.layers(), shape.skip);
         let rows = job.x.len() / 3;
         let (beta, inv_beta) = (E::of(shape.beta), E::of(1.0 / shape.beta));
-        let at = SlabLayout::new(shape, rows);
+        let at = self.slab.for_rows(rows);
         // The backward and ∇ₓf need the slopes s_l; f alone does not.
         let slopes = self.with_gradient || job.saved.is_some();
+        let ForwardScratch { slab, a, b } = scratch;
         let slab: &mut [E] = match job.saved {
             Some(saved) => saved,
-            None => &mut scratch.slab[..rows * shape.saved_per_row(true)],
+            None => {
+                let own = slab.as_mut().expect("a pass that does not save has a slab");
+                &mut own[..rows * shape.saved_per_row(true)]
+            }
         };
         let (h, s, t) = at.split_mut(slab);
-        let Scratch { a, b, .. } = scratch;
         for l in 0..layers {
             // y_l is written into h_l's place and turned into h_l there.
             let (below, above) = h.split_at_mut(at.layer(l).start);
@@ -685,15 +731,20 @@ impl<E: KernelFloat> Pass<'_, '_, E> {
     }
 
     #[inline(always)]
-    fn backward_chunk(&self, first_row: usize, job: BackwardJob<'_, E>, scratch: &mut Scratch<E>) {
+    fn backward_chunk(
+        &self,
+        first_row: usize,
+        job: BackwardJob<'_, E>,
+        scratch: &mut BackwardScratch<E>,
+    ) {
         let shape = self.shape();
         let (w, layers, skip) = (&shape.widths, shape.layers(), shape.skip);
         let rows = job.x.len() / 3;
         let beta = E::of(shape.beta);
         let cols = KernelShape::output_cols(self.with_gradient);
-        let at = SlabLayout::new(shape, rows);
+        let at = self.slab.for_rows(rows);
         let (h, s, t) = at.split(job.saved);
-        let Scratch { dy, a, b, c, .. } = scratch;
+        let BackwardScratch { dy, a, b, c } = scratch;
         let acc = job.acc;
         let last = layers - 1;
         let out_w = self.param(&self.layout.out_weight);

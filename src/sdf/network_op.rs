@@ -68,16 +68,17 @@ pub trait NetworkKernelOps: Backend {
         save: bool,
     ) -> (FloatTensor<Self>, Option<Saved>);
 
-    /// (∂first, ∂skip, ∂params) for the output gradient `grad`.
-    fn network_backward(inputs: BackwardInputs<Self>, spec: &NetworkSpec)
-    -> [FloatTensor<Self>; 3];
+    /// (∂first, ∂skip, ∂params) for the output gradient `grad` of the pass `forward`.
+    fn network_backward(
+        grad: FloatTensor<Self>,
+        forward: &SavedForward<Self>,
+        spec: &NetworkSpec,
+    ) -> [FloatTensor<Self>; 3];
 }
 
-/// Everything the backward reads: the output gradient, the forward's inputs and its saved
-/// values.
+/// What the backward reads of a forward pass: its inputs and its saved values.
 #[derive(Debug, Clone)]
-pub struct BackwardInputs<B: Backend> {
-    pub grad: FloatTensor<B>,
+pub struct SavedForward<B: Backend> {
     pub points: FloatTensor<B>,
     pub first: FloatTensor<B>,
     pub skip: FloatTensor<B>,
@@ -257,18 +258,20 @@ macro_rules! host_backed {
             }
 
             fn network_backward(
-                inputs: BackwardInputs<Self>,
+                grad: FloatTensor<Self>,
+                inputs: &SavedForward<Self>,
                 spec: &NetworkSpec,
             ) -> [FloatTensor<Self>; 3] {
                 fn typed<E: SavedFloat + burn::tensor::Element + bytemuck::Pod>(
-                    inputs: &BackwardInputs<$backend>,
+                    grad: &FloatTensor<$backend>,
+                    inputs: &SavedForward<$backend>,
                     spec: &NetworkSpec,
                 ) -> [FloatTensor<$backend>; 3] {
                     let host = host::Inputs(
                         [&inputs.points, &inputs.first, &inputs.skip, &inputs.params]
                             .map(|t| $values::<E>(t)),
                     );
-                    let grad = $values::<E>(&inputs.grad);
+                    let grad = $values::<E>(grad);
                     let grads = host.backward(spec, &grad, &inputs.saved);
                     [
                         $tensor(grads.first, $shape(&inputs.first)),
@@ -277,8 +280,8 @@ macro_rules! host_backed {
                     ]
                 }
                 match inputs.points.dtype() {
-                    DType::F32 => typed::<f32>(&inputs, spec),
-                    DType::F64 => typed::<f64>(&inputs, spec),
+                    DType::F32 => typed::<f32>(&grad, inputs, spec),
+                    DType::F64 => typed::<f64>(&grad, inputs, spec),
                     other => panic!("network operation on {other:?}"),
                 }
             }
@@ -357,36 +360,18 @@ mod ndarray {
 struct NetworkBackward;
 
 impl<B: Backend + NetworkKernelOps> Backward<B, 3> for NetworkBackward {
-    type State = (BackwardState<B>, NetworkSpec);
+    type State = (SavedForward<B>, NetworkSpec);
 
     fn backward(self, ops: Ops<Self::State, 3>, grads: &mut Gradients, _: &mut Checkpointer) {
-        let (state, spec) = ops.state;
+        let (forward, spec) = ops.state;
         let grad = grads.consume::<B>(&ops.node);
-        let inputs = BackwardInputs {
-            grad,
-            points: state.points,
-            first: state.first,
-            skip: state.skip,
-            params: state.params,
-            saved: state.saved,
-        };
-        let results = B::network_backward(inputs, &spec);
+        let results = B::network_backward(grad, &forward, &spec);
         for (node, grad) in ops.parents.into_iter().zip(results) {
             if let Some(node) = node {
                 grads.register::<B>(node.id, grad);
             }
         }
     }
-}
-
-/// The forward's inputs and saved values, kept for the backward.
-#[derive(Debug, Clone)]
-struct BackwardState<B: Backend> {
-    points: FloatTensor<B>,
-    first: FloatTensor<B>,
-    skip: FloatTensor<B>,
-    params: FloatTensor<B>,
-    saved: Saved,
 }
 
 impl<B: Backend + NetworkKernelOps, C: CheckpointStrategy> NetworkOps for Autodiff<B, C> {
@@ -419,7 +404,7 @@ impl<B: Backend + NetworkKernelOps, C: CheckpointStrategy> NetworkOps for Autodi
                     true,
                 );
                 let saved = saved.expect("a saving forward pass returns its saved values");
-                let state = BackwardState {
+                let state = SavedForward {
                     points,
                     first,
                     skip,
