@@ -6,8 +6,10 @@
 
 pub mod anatomy;
 pub mod cli;
+pub mod cohort;
 pub mod config;
 pub mod db;
+pub mod digest;
 pub mod engine;
 pub mod extract;
 pub mod formats;

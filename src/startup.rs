@@ -9,15 +9,16 @@ use std::time::Duration;
 use anyhow::Context;
 use sqlx::SqlitePool;
 use tokio::net::TcpListener;
-use tokio::sync::{Notify, watch};
+use tokio::sync::watch;
 
 use crate::config::Config;
 use crate::db;
+use crate::db::states::ModelStatus;
+use crate::engine::Engine;
 use crate::http::access::AccessPolicy;
 use crate::http::mesh_cache::MeshCache;
 use crate::http::{self, AppState};
-use crate::jobs::engine::CohortEngine;
-use crate::jobs::{JobContext, JobControls, worker};
+use crate::jobs::{JobContext, JobControls, JobQueue, worker};
 use crate::telemetry::ServiceMetrics;
 
 /// Longest a shutdown waits for running jobs and open requests before abandoning them.
@@ -37,7 +38,7 @@ pub struct Application {
 impl Application {
     /// Prepares everything that can fail before serving: database, recovery, model
     /// registration, listener.
-    pub async fn build(config: Config, engine: Arc<dyn CohortEngine>) -> anyhow::Result<Self> {
+    pub async fn build(config: Config, engine: Arc<dyn Engine>) -> anyhow::Result<Self> {
         let access = AccessPolicy::from_config(&config)?;
         if access.is_enabled() {
             tracing::info!(
@@ -83,12 +84,13 @@ impl Application {
             models_dir: config.models_dir.clone(),
         };
         let mesh_cache = Arc::new(MeshCache::new(config.mesh_cache_bytes));
+        let queue = JobQueue::new(pool.clone(), config.max_queue, config.retry_after_secs);
         let state = AppState {
             pool,
             mesh_cache,
             config: Arc::new(config),
             jobs,
-            job_wake: Arc::new(Notify::new()),
+            queue,
             access: Arc::new(access),
             read_only_switch,
         };
@@ -124,7 +126,7 @@ impl Application {
             .map(|i| {
                 let (ctx, wake, stop) = (
                     self.state.jobs.clone(),
-                    self.state.job_wake.clone(),
+                    self.state.queue.waker(),
                     stop_rx.clone(),
                 );
                 tokio::spawn(worker::run_worker_until_stopped(i, ctx, wake, stop))
@@ -199,7 +201,7 @@ impl Application {
 /// facts (off the executor). Returns whether it was newly registered.
 pub async fn register_model(
     pool: &SqlitePool,
-    engine: Arc<dyn CohortEngine>,
+    engine: Arc<dyn Engine>,
     id: &str,
     dir: &Path,
 ) -> anyhow::Result<bool> {
@@ -210,10 +212,10 @@ pub async fn register_model(
     let info = tokio::task::spawn_blocking(move || engine.model_info(&owned))
         .await?
         .with_context(|| format!("cannot read the model in {}", dir.display()))?;
-    let manifest = serde_json::to_value(&info)?;
     let mut conn = pool.acquire().await?;
+    let dir_path = dir.to_string_lossy();
     let inserted =
-        db::models::insert_if_absent(&mut conn, id, &dir.to_string_lossy(), &manifest, "ready")
+        db::models::insert_if_absent(&mut conn, id, &dir_path, Some(&info), ModelStatus::Ready)
             .await?;
     if inserted {
         tracing::info!(

@@ -7,6 +7,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use tracing_subscriber::EnvFilter;
 
+use crate::db::states::{JobKind, JobStatus};
+
 /// Installs the global subscriber: `RUST_LOG` if set, else `default_filter`; JSON lines when
 /// `json` (for log collectors), human-readable otherwise. A second call is a no-op.
 pub fn init_subscriber(default_filter: &str, json: bool) {
@@ -95,9 +97,9 @@ impl ServiceMetrics {
     }
 
     /// Records a finished job run: kind, outcome, wall time.
-    pub fn observe_job(&self, kind: &str, outcome: &str, seconds: f64) {
+    pub fn observe_job(&self, kind: JobKind, outcome: &str, seconds: f64) {
         let mut map = self.jobs.lock().unwrap_or_else(|e| e.into_inner());
-        map.entry((kind.to_owned(), outcome.to_owned()))
+        map.entry((kind.as_str().to_owned(), outcome.to_owned()))
             .or_insert_with(|| Histogram::new(JOB_BUCKETS))
             .observe(seconds);
     }
@@ -113,7 +115,7 @@ impl ServiceMetrics {
     }
 
     /// Renders every metric; `jobs_by_state` comes from the database at scrape time.
-    pub fn render(&self, jobs_by_state: &[(String, i64)]) -> String {
+    pub fn render(&self, jobs_by_state: &[(JobStatus, i64)]) -> String {
         let mut out = String::new();
         out.push_str("# HELP aortagen_http_request_duration_seconds HTTP request latency.\n");
         out.push_str("# TYPE aortagen_http_request_duration_seconds histogram\n");
@@ -128,10 +130,10 @@ impl ServiceMetrics {
         }
         out.push_str("# HELP aortagen_jobs Jobs in the queue table by state.\n");
         out.push_str("# TYPE aortagen_jobs gauge\n");
-        for state in ["queued", "running", "succeeded", "failed", "cancelled"] {
+        for &state in JobStatus::ALL {
             let n = jobs_by_state
                 .iter()
-                .find(|(s, _)| s == state)
+                .find(|(s, _)| *s == state)
                 .map_or(0, |(_, n)| *n);
             let _ = writeln!(out, "aortagen_jobs{{state=\"{state}\"}} {n}");
         }
@@ -168,7 +170,7 @@ mod tests {
         m.observe_http("GET", "/v1/shapes/{id}", 200, 0.003);
         m.observe_http("GET", "/v1/shapes/{id}", 200, 0.2);
         m.inc_shapes_generated();
-        let text = m.render(&[("queued".into(), 2)]);
+        let text = m.render(&[(JobStatus::Queued, 2)]);
         let l = "method=\"GET\",route=\"/v1/shapes/{id}\",status=\"200\"";
         assert!(text.contains(&format!(
             "aortagen_http_request_duration_seconds_bucket{{{l},le=\"0.0025\"}} 0"

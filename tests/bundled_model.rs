@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use aortagen::sdf::backend::Backend;
-use aortagen::sdf::generate::Mixture;
+use aortagen::sdf::mixing::Mixture;
 use aortagen::sdf::reconstruct::{ExtractionMethod, reconstruct};
 use aortagen::sdf::store::LoadedModel;
 
@@ -53,7 +53,7 @@ fn the_engine_finds_a_training_shape_as_its_own_nearest_neighbour() {
     use std::sync::atomic::AtomicBool;
 
     use aortagen::engine::SdfEngine;
-    use aortagen::jobs::engine::{CohortEngine, ShapeSpec};
+    use aortagen::engine::{Engine, ShapeSpec};
 
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
     let engine = SdfEngine::new(Backend::default()).with_chamfer_points(10_000);
@@ -86,27 +86,33 @@ fn the_engine_finds_a_training_shape_as_its_own_nearest_neighbour() {
     assert!(other.chamfer > own.chamfer, "{other:?} vs {own:?}");
 }
 
+/// The cohort pipeline measures training shapes (for targets) as a direct reconstruction of
+/// each latent in its own mm frame measures them.
 #[test]
-fn the_service_and_the_command_line_measure_training_shapes_alike() {
+fn training_shapes_are_measured_as_their_direct_reconstruction() {
     use std::sync::atomic::AtomicBool;
 
+    use aortagen::anatomy::shape::measure_shape;
+    use aortagen::cohort::targets::feasibility::measure_training_shapes;
     use aortagen::engine::SdfEngine;
-    use aortagen::jobs::conditioned::measure_training_shapes;
 
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default");
     let engine = SdfEngine::new(Backend::default());
-    let service = measure_training_shapes(&engine, &dir, 2, &AtomicBool::new(false)).unwrap();
+    let measured = measure_training_shapes(&engine, &dir, 2, &AtomicBool::new(false)).unwrap();
     let model = bundled();
     let latents = model.latents();
-    let cli = aortagen::sdf::conditioned::measure_training_shapes(
-        &model,
-        &latents[..2],
-        service.resolution,
-        ExtractionMethod::Fast,
-    )
-    .unwrap();
-    assert_eq!(service.shapes, cli);
-    for a in cli
+    let transforms = model.manifest.transforms();
+    let direct: Vec<_> = (0..2)
+        .map(|i| {
+            let field = model.field(&latents[i]).unwrap();
+            let mesh = reconstruct(&field, measured.resolution, ExtractionMethod::Fast)
+                .unwrap()
+                .mesh;
+            measure_shape(&transforms[i].mesh_to_mesh_units(&mesh)).ok()
+        })
+        .collect();
+    assert_eq!(measured.shapes, direct);
+    for a in direct
         .iter()
         .map(|a| a.as_ref().expect("a training root measures"))
     {

@@ -238,7 +238,7 @@ fn check_database(path: &std::path::Path, cohorts: &[i64]) {
                     digest, sha,
                     "cohort {cohort} shape {index}: mesh bytes changed"
                 );
-                let decoded = aortagen::db::mesh_blob::decode(&mesh)
+                let decoded = aortagen::formats::mesh_blob::decode(&mesh)
                     .unwrap_or_else(|e| panic!("cohort {cohort} shape {index}: {e:#}"));
                 decoded.validate().expect("a valid stored mesh");
             }

@@ -1,26 +1,40 @@
 //! Property-based tests of the cohort request rules (DESIGN §4) and of the per-shape
 //! weights and selections a valid request turns into.
 
-use aortagen::anatomy::targets::Measurement;
-use aortagen::http::cohorts::dto::{CreateCohort, RESOLUTION_RANGE};
-use aortagen::http::error::ApiError;
-use aortagen::http::extract::parse_json;
 use std::sync::Arc;
 
-use aortagen::jobs::plan::{CohortPlan, WEIGHT_SUM_TOLERANCE, Weighting, check_weights};
-use aortagen::sdf::generate::Selection;
+use aortagen::cohort::targets::Measurement;
+use aortagen::cohort::weights::{WEIGHT_SUM_TOLERANCE, check_weights};
+use aortagen::cohort::{
+    CohortPlan, CohortRequest, RESOLUTION_RANGE, RequestLimits, Selection, WeightChoice,
+};
+use aortagen::http::cohorts::dto::CreateCohort;
+use aortagen::http::error::ApiError;
+use aortagen::http::extractors::parse_json;
 use proptest::prelude::*;
 use serde_json::json;
 
 const MAX_COUNT: u32 = 500;
 /// The service's default work budget: `count × resolution³` voxels per cohort.
 const MAX_VOXELS: u64 = 2_000_000_000;
+/// Smallest and largest accepted resolution.
+const RESOLUTIONS: (i64, i64) = (
+    *RESOLUTION_RANGE.start() as i64,
+    *RESOLUTION_RANGE.end() as i64,
+);
 
-fn request(body: serde_json::Value) -> Result<CreateCohort, ApiError> {
+fn request(body: serde_json::Value) -> Result<CohortRequest<i64>, ApiError> {
     let bytes = serde_json::to_vec(&body).unwrap();
     let parsed: CreateCohort = parse_json(&bytes)?;
-    parsed.check_shape(MAX_COUNT, MAX_VOXELS)?;
-    Ok(parsed)
+    let limits = RequestLimits {
+        max_count: MAX_COUNT,
+        max_voxels: MAX_VOXELS,
+    };
+    Ok(CohortRequest::parse(
+        parsed.fields(),
+        limits,
+        rand::random::<u64>,
+    )?)
 }
 
 fn field_of(err: &ApiError) -> Option<&str> {
@@ -64,7 +78,7 @@ proptest! {
     fn valid_requests_are_accepted_within_the_work_budget(
         count in 1i64..=i64::from(MAX_COUNT),
         arity in 2i64..=12,
-        resolution in RESOLUTION_RANGE.0..=RESOLUTION_RANGE.1,
+        resolution in RESOLUTIONS.0..=RESOLUTIONS.1,
         seed in any::<u64>(),
         dirichlet in any::<bool>(),
     ) {
@@ -75,8 +89,8 @@ proptest! {
         match request(body) {
             Ok(parsed) => {
                 prop_assert!(voxels <= MAX_VOXELS);
-                prop_assert_eq!(parsed.count, count);
-                prop_assert_eq!(parsed.seed, Some(seed));
+                prop_assert_eq!(i64::from(parsed.count), count);
+                prop_assert_eq!(parsed.seed, seed);
             }
             Err(err) => {
                 // The only rule such a request can break is the work budget, named on count.
@@ -117,7 +131,7 @@ proptest! {
 
     #[test]
     fn resolutions_out_of_range_name_resolution(
-        resolution in prop_oneof![i64::MIN..RESOLUTION_RANGE.0, RESOLUTION_RANGE.1 + 1..=i64::MAX]
+        resolution in prop_oneof![i64::MIN..RESOLUTIONS.0, RESOLUTIONS.1 + 1..=i64::MAX]
     ) {
         let body = json!({"model_id": "m", "count": 1, "arity": 2, "resolution": resolution});
         let err = request(body).unwrap_err();
@@ -161,7 +175,7 @@ proptest! {
         let mut w = w;
         let i = position.index(w.len());
         w[i] = bad;
-        let err = check_weights(&w, w.len()).unwrap_err();
+        let err = check_weights(&w, w.len()).unwrap_err().to_string();
         prop_assert!(err.contains(&format!("entry {i}")), "{}", err);
     }
 
@@ -186,13 +200,13 @@ proptest! {
         let plan = CohortPlan {
             training_shapes,
             arity,
-            weights: None,
-            weighting: if dirichlet { Weighting::Dirichlet } else { Weighting::Equal },
+            weights: if dirichlet { WeightChoice::Dirichlet } else { WeightChoice::Equal },
             seed,
             resolution: 64,
             selection: if spread { Selection::Spread } else { Selection::Uniform },
             latent_noise: 0.0,
             latents: Some(Arc::new(pseudo_latents(training_shapes, latent_seed))),
+            anchors: Vec::new(),
         };
         let spec = plan.shape_spec(index);
         prop_assert_eq!(&spec, &plan.shape_spec(index));
@@ -229,9 +243,9 @@ proptest! {
             request(body)
         };
         let ok = with(json!({ name: { "min": lo, "max": hi } })).unwrap();
-        let targets = ok.targets().unwrap().unwrap();
-        prop_assert_eq!(targets.iter().count(), 1);
-        prop_assert_eq!(ok.max_candidates, Some(candidates));
+        let search = ok.targets.unwrap();
+        prop_assert_eq!(search.targets.iter().count(), 1);
+        prop_assert_eq!(i64::from(search.max_candidates), candidates);
         if lo < hi {
             let err = with(json!({ name: { "min": hi, "max": lo } })).unwrap_err();
             let field = format!("targets.{name}");

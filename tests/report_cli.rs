@@ -5,10 +5,10 @@ use std::path::Path;
 use aortagen::cli::compare::CompareArgs;
 use aortagen::cli::generate::{GenerateArgs, Units};
 use aortagen::cli::report::{ReportArgs, run};
+use aortagen::cohort::{Selection, Weighting};
 use aortagen::formats::MeshFormat;
 use aortagen::formats::{MeshMetadata, write_mesh_file};
 use aortagen::sdf::backend::Backend;
-use aortagen::sdf::generate::{Selection, Weighting};
 use aortagen::sdf::reconstruct::ExtractionMethod;
 use aortagen::synth::generate_root;
 

@@ -410,118 +410,111 @@ fn a_damaged_optimizer_state_stops_a_resume() {
 
 mod cohort {
     use super::*;
-    use aortagen::sdf::generate::{CohortSpecError, MixSpec, Mixture, Weighting, generate_shape};
+    use aortagen::cohort::{
+        CohortFields, CohortPlan, CohortRequest, RequestError, RequestLimits, Weighting,
+    };
+    use aortagen::engine::{Engine, SdfEngine};
+    use aortagen::sdf::mixing::Mixture;
 
-    fn spec(arity: usize, weights: Option<Vec<f64>>) -> MixSpec {
-        MixSpec {
+    /// A request of `arity` shapes with equal weights unless `weights` are given, checked
+    /// against a model of [`SHAPES`] training shapes.
+    fn parse(arity: i64, weights: Option<Vec<f64>>) -> Result<CohortRequest<i64>, RequestError> {
+        parse_with(arity, weights, Weighting::Equal, 7)
+    }
+
+    fn parse_with(
+        arity: i64,
+        weights: Option<Vec<f64>>,
+        weighting: Weighting,
+        seed: u64,
+    ) -> Result<CohortRequest<i64>, RequestError> {
+        let fields = CohortFields {
+            count: 20,
             arity,
             weights,
-            weighting: Weighting::Equal,
-        }
+            weighting: Some(weighting),
+            seed: Some(seed),
+            resolution: Some(32),
+            ..CohortFields::default()
+        };
+        let request = CohortRequest::parse(fields, RequestLimits::NONE, || seed)?;
+        request.check_model(SHAPES)?;
+        Ok(request)
+    }
+
+    fn plan(request: &CohortRequest<i64>, training_shapes: usize) -> CohortPlan {
+        CohortPlan::new(request, training_shapes, None, Vec::new())
     }
 
     #[test]
     fn each_broken_rule_is_named() {
-        type Case = (&'static str, MixSpec, CohortSpecError, &'static str);
+        type Case = (
+            &'static str,
+            i64,
+            Option<Vec<f64>>,
+            &'static str,
+            &'static str,
+        );
         let cases: Vec<Case> = vec![
-            (
-                "arity 1",
-                spec(1, None),
-                CohortSpecError::ArityTooSmall { arity: 1 },
-                "arity",
-            ),
-            (
-                "arity > shapes",
-                spec(4, None),
-                CohortSpecError::ArityTooLarge {
-                    arity: 4,
-                    shapes: 3,
-                },
-                "arity",
-            ),
+            ("arity 1", 1, None, "arity", "range"),
+            ("arity > shapes", 4, None, "arity", "range"),
             (
                 "too few weights",
-                spec(3, Some(vec![0.5, 0.5])),
-                CohortSpecError::WeightCount { arity: 3, found: 2 },
+                3,
+                Some(vec![0.5, 0.5]),
                 "weights",
+                "length",
             ),
             (
                 "too many weights",
-                spec(2, Some(vec![0.5, 0.25, 0.25])),
-                CohortSpecError::WeightCount { arity: 2, found: 3 },
+                2,
+                Some(vec![0.5, 0.25, 0.25]),
                 "weights",
+                "length",
             ),
             (
                 "negative",
-                spec(2, Some(vec![1.5, -0.5])),
-                CohortSpecError::NegativeWeight {
-                    index: 1,
-                    value: -0.5,
-                },
+                2,
+                Some(vec![1.5, -0.5]),
                 "weights",
+                "non-negative",
             ),
             (
                 "infinite",
-                spec(2, Some(vec![f64::INFINITY, 0.0])),
-                CohortSpecError::NonFiniteWeight {
-                    index: 0,
-                    value: f64::INFINITY,
-                },
+                2,
+                Some(vec![f64::INFINITY, 0.0]),
                 "weights",
+                "finite",
             ),
-            (
-                "sum 0.9",
-                spec(2, Some(vec![0.5, 0.4])),
-                CohortSpecError::WeightSum { sum: 0.9 },
-                "weights",
-            ),
+            ("sum 0.9", 2, Some(vec![0.5, 0.4]), "weights", "sum"),
             (
                 "sum 1 + 2e-6",
-                spec(2, Some(vec![0.5, 0.500002])),
-                CohortSpecError::WeightSum {
-                    sum: 0.5 + 0.500002,
-                },
+                2,
+                Some(vec![0.5, 0.500002]),
                 "weights",
+                "sum",
             ),
         ];
-        for (name, spec, expected, field) in cases {
-            let err = spec.validate(SHAPES).expect_err(name);
-            assert_eq!(err, expected, "{name}");
-            assert_eq!(err.field(), field, "{name}");
+        for (name, arity, weights, field, rule) in cases {
+            let err = parse(arity, weights).expect_err(name);
+            assert_eq!((err.field.as_str(), err.rule), (field, rule), "{name}");
             assert!(err.to_string().contains(field), "{name}: {err}");
         }
-        // NaN compares unequal to itself: check the variant and the message.
-        let err = spec(2, Some(vec![f64::NAN, 1.0]))
-            .validate(SHAPES)
-            .unwrap_err();
-        assert!(
-            matches!(err, CohortSpecError::NonFiniteWeight { index: 0, .. }),
-            "{err:?}"
-        );
-        assert!(err.to_string().contains("finite"), "{err}");
-        assert_eq!(
-            spec(3, Some(vec![0.2, 0.3, 0.5 + 5e-7])).validate(SHAPES),
-            Ok(())
-        );
-        assert_eq!(spec(2, Some(vec![1.0, 0.0])).validate(SHAPES), Ok(()));
+        let err = parse(2, Some(vec![f64::NAN, 1.0])).unwrap_err();
+        assert_eq!(err.rule, "finite", "{err}");
+        assert!(err.to_string().contains("entry 0"), "{err}");
+        assert!(parse(3, Some(vec![0.2, 0.3, 0.5 + 5e-7])).is_ok());
+        assert!(parse(2, Some(vec![1.0, 0.0])).is_ok());
     }
 
     #[test]
     fn mixtures_are_seeded_distinct_and_convex() {
-        let dirichlet = MixSpec {
-            arity: 3,
-            weights: None,
-            weighting: Weighting::Dirichlet,
-        };
+        let dirichlet = plan(&parse_with(3, None, Weighting::Dirichlet, 42).unwrap(), 10);
         let mut seen = std::collections::HashSet::new();
         for shape in 0..20 {
-            let m = dirichlet.mixture(10, 42, shape).unwrap();
-            assert_eq!(
-                m,
-                dirichlet.mixture(10, 42, shape).unwrap(),
-                "same seed, same shape"
-            );
-            let mut idx = m.indices.clone();
+            let m = dirichlet.shape_spec(shape);
+            assert_eq!(m, dirichlet.shape_spec(shape), "same seed, same shape");
+            let mut idx = m.training_indices.clone();
             idx.sort_unstable();
             idx.dedup();
             assert_eq!(idx.len(), 3);
@@ -531,14 +524,12 @@ mod cohort {
             seen.insert(format!("{:?}", m.weights));
         }
         assert_eq!(seen.len(), 20, "Dirichlet weights differ between shapes");
-        assert_ne!(
-            dirichlet.mixture(10, 42, 0).unwrap(),
-            dirichlet.mixture(10, 43, 0).unwrap()
-        );
-        let equal = spec(4, None).mixture(10, 1, 0).unwrap();
-        assert_eq!(equal.weights, [0.25; 4]);
-        let given = spec(2, Some(vec![0.3, 0.7])).mixture(10, 1, 0).unwrap();
-        assert_eq!(given.weights, [0.3, 0.7]);
+        let other_seed = plan(&parse_with(3, None, Weighting::Dirichlet, 43).unwrap(), 10);
+        assert_ne!(dirichlet.shape_spec(0), other_seed.shape_spec(0));
+        let equal = plan(&parse_with(3, None, Weighting::Equal, 1).unwrap(), 10);
+        assert_eq!(equal.shape_spec(0).weights, [1.0 / 3.0; 3]);
+        let given = plan(&parse(2, Some(vec![0.3, 0.7])).unwrap(), 10);
+        assert_eq!(given.shape_spec(0).weights, [0.3, 0.7]);
     }
 
     #[test]
@@ -566,52 +557,39 @@ mod cohort {
         let dir = tempfile::tempdir().unwrap();
         train_tiny(dir.path(), 2);
         let model = load(dir.path());
-        let latents = model.latents();
-        let dirichlet = MixSpec {
-            arity: 2,
-            weights: None,
-            weighting: Weighting::Dirichlet,
-        };
-        let shape = generate_shape(
-            &model,
-            &latents,
-            &dirichlet,
-            7,
-            1,
-            20,
-            ExtractionMethod::Fast,
-        )
-        .unwrap();
-        assert_eq!(shape.mixture, dirichlet.mixture(SHAPES, 7, 1).unwrap());
-        shape.mesh.validate().unwrap();
+        let request = parse_with(2, None, Weighting::Dirichlet, 7).unwrap();
+        let spec = plan(&request, SHAPES).shape_spec(1);
+        let engine = SdfEngine::new(Backend::Flex);
+        let shape = engine
+            .generate_shape(dir.path(), &spec, &AtomicBool::new(false))
+            .unwrap();
+        shape.mesh_unit.validate().unwrap();
         let transforms = model.manifest.transforms();
-        let radius: f64 = shape
-            .mixture
+        let mixture = Mixture {
+            indices: spec.training_indices.clone(),
+            weights: spec.weights.clone(),
+        };
+        let radius: f64 = mixture
             .indices
             .iter()
-            .zip(&shape.mixture.weights)
+            .zip(&mixture.weights)
             .map(|(&i, &w)| w * transforms[i].radius)
             .sum();
         assert!((shape.transform.radius - radius).abs() < 1e-9);
-        let mm = shape.mesh_in_mesh_units();
-        let p = shape.mesh.positions[0].map(f64::from);
+        assert_eq!(
+            shape.transform,
+            mixture.mix_transforms(&transforms).unwrap()
+        );
+        let mm = shape.transform.mesh_to_mesh_units(&shape.mesh_unit);
+        let p = shape.mesh_unit.positions[0].map(f64::from);
         let q = shape.transform.to_mesh_units(p);
         assert!((0..3).all(|c| (f64::from(mm.positions[0][c]) - q[c]).abs() < 1e-3));
-        let err = generate_shape(
-            &model,
-            &latents,
-            &spec(5, None),
-            7,
-            0,
-            20,
-            ExtractionMethod::Dense,
-        )
-        .unwrap_err();
+        let err = parse(5, None).unwrap_err();
         assert!(err.to_string().contains("arity"), "{err}");
     }
 
     /// Runs `aortagen generate` on `model_dir` with `anchors`, fixed `weights`, one shape at
-    /// 20³ in unit-ball PLY; returns the output directory.
+    /// 32³ (the smallest cohort resolution) in unit-ball PLY; returns the output directory.
     fn generate_cli(
         model_dir: &Path,
         anchors: &[&str],
@@ -624,7 +602,7 @@ mod cohort {
             arity: 2,
             weights: Some(weights.into()),
             weighting: Weighting::Dirichlet,
-            selection: aortagen::sdf::generate::Selection::Uniform,
+            selection: aortagen::cohort::Selection::Uniform,
             anchors: anchors.iter().map(|a| a.to_string()).collect(),
             latent_noise: 0.0,
             min_novelty: None,
@@ -633,7 +611,7 @@ mod cohort {
             novelty_points: 500,
             count: 1,
             seed: 3,
-            resolution: 20,
+            resolution: 32,
             format: aortagen::formats::MeshFormat::Ply,
             units: Units::Unit,
             out: out.path().to_path_buf(),
@@ -677,14 +655,15 @@ mod cohort {
             provenance["anchors"],
             serde_json::json!([{"name": "patient", "weight": 1.0}])
         );
-        assert_eq!(provenance["indices"].as_array().unwrap().len(), 1);
-        assert_eq!(provenance["weights"], serde_json::json!([0.0]));
+        // One training shape, then the anchor; the weights list both in that order.
+        assert_eq!(provenance["training_indices"].as_array().unwrap().len(), 1);
+        assert_eq!(provenance["weights"], serde_json::json!([0.0, 1.0]));
         let radius = provenance["transform"]["radius"].as_f64().unwrap();
         assert!((radius - transform.radius).abs() < 1e-9, "{radius}");
         let written =
             aortagen::formats::read_mesh_file(&out.path().join("shape_0000.ply")).unwrap();
         let field = model.field(&latents[2]).unwrap();
-        let expected = reconstruct(&field, 20, ExtractionMethod::Fast)
+        let expected = reconstruct(&field, 32, ExtractionMethod::Fast)
             .unwrap()
             .mesh;
         assert_eq!(written.positions, expected.positions);
@@ -695,7 +674,7 @@ mod cohort {
             serde_json::from_slice(&std::fs::read(out.path().join("shape_0000.json")).unwrap())
                 .unwrap();
         assert_eq!(provenance["anchors"][0]["weight"], 0.5);
-        assert_eq!(provenance["weights"], serde_json::json!([0.5]));
+        assert_eq!(provenance["weights"], serde_json::json!([0.5, 0.5]));
 
         // A name the model does not have is refused, listing the names it has.
         let err = generate_cli(dir.path(), &["nobody"], "0,1").unwrap_err();

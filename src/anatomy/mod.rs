@@ -14,12 +14,12 @@
 
 pub mod centreline;
 pub mod geodesic;
+pub mod measurement;
 pub mod polyline;
 pub mod root;
 pub mod sections;
 pub mod shape;
 pub mod surface;
-pub mod targets;
 pub mod tracking;
 
 use serde::{Deserialize, Serialize};

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::progress::init_logging;
+use crate::cohort::ShapeRecord;
 use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
 use crate::geometry::sampling::sample_surface;
@@ -19,7 +20,6 @@ use crate::report::{Report, Section, footer, render_html};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::read_mesh_directory;
 use crate::sdf::evaluation::{CHAMFER_UNITS, quantile};
-use crate::sdf::generate::Provenance;
 use crate::sdf::novelty::training_surfaces;
 use crate::sdf::reconstruct::ExtractionMethod;
 use crate::sdf::store::LoadedModel;
@@ -200,10 +200,8 @@ pub fn measure_cohort(
             "mm" => provenance.transform.mesh_to_unit(mesh),
             other => bail!("{name}: unknown units {other:?} in its provenance"),
         });
-        if let Some(n) = provenance.novelty {
-            novelty.push(n.chamfer);
-            nearest.insert(n.nearest);
-        }
+        novelty.push(provenance.novelty.chamfer);
+        nearest.insert(provenance.novelty.nearest);
     }
     let mut measured = diversity_of(label, dir, &unit, novelty, points, seed)?;
     measured.distinct_nearest = nearest.len();
@@ -241,7 +239,7 @@ fn diversity_of(
 }
 
 /// The provenance JSON `aortagen generate` writes beside each mesh.
-fn read_provenance(dir: &Path, mesh_name: &str) -> anyhow::Result<Provenance> {
+fn read_provenance(dir: &Path, mesh_name: &str) -> anyhow::Result<ShapeRecord> {
     let stem = Path::new(mesh_name)
         .file_stem()
         .context("mesh file without a name")?;

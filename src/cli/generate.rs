@@ -1,29 +1,29 @@
-//! `aortagen generate`: new shapes as convex combinations of learned latents.
+//! `aortagen generate`: a cohort drawn by the same pipeline the service runs
+//! ([`crate::cohort`]), so a request gives the same shapes here as through the API. Each
+//! shape is written as a mesh file with its record (`shape_NNNN.json`) beside it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 
-use anyhow::{Context, ensure};
+use anyhow::Context;
 
 use super::progress::{init_logging, terminal_bar};
-use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
-use crate::anatomy::targets::{
-    CandidateSource, DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, Measured, SCREEN_RESOLUTION,
-    TargetRange, Targets, check_feasible, guided_pool, parse_target_arg, refine_weights, search,
-    training_ranges,
+use crate::cohort::targets::feasibility::training_ranges;
+use crate::cohort::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, parse_target_arg};
+use crate::cohort::weights::parse_weights;
+use crate::cohort::{
+    CohortFields, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape,
+    DEFAULT_RESOLUTION, EngineHandle, RequestError, RequestLimits, Selection, ShapeRecord,
+    Weighting,
 };
+use crate::engine::{AnchorLatent, Engine, SdfEngine};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
-use crate::sdf::anchors::{Anchor, AnchorSet};
+use crate::sdf::anchors::AnchorSet;
 use crate::sdf::backend::Backend;
-use crate::sdf::conditioned::{candidate_mixture, measure_training_shapes};
-use crate::sdf::generate::{
-    Diversity, GeneratedShape, MAX_REDRAWS, MixSpec, Mixture, Provenance, Selection, Weighting,
-    generate_from_mixture, generate_shape_with, parse_weights,
-};
-use crate::sdf::novelty::{Novelty, NoveltyReference, training_surfaces};
-use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
-use crate::sdf::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
-use crate::sdf::store::LoadedModel;
+use crate::sdf::reconstruct::ExtractionMethod;
+use crate::sdf::store::read_manifest;
 
 /// Coordinates of the written meshes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -35,13 +35,22 @@ pub enum Units {
     Unit,
 }
 
-/// Write a cohort of generated shapes (mesh + provenance JSON each).
+impl Units {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Mm => "mm",
+            Self::Unit => "unit",
+        }
+    }
+}
+
+/// Write a cohort of generated shapes (mesh + record JSON each).
 #[derive(Debug, clap::Args)]
 pub struct GenerateArgs {
     /// Model directory written by `aortagen train`.
     #[arg(long)]
     pub model: PathBuf,
-    /// Training shapes combined per generated shape (k ≥ 2).
+    /// Shapes combined per generated shape, anchors included (k ≥ 2).
     #[arg(long)]
     pub arity: usize,
     /// Fixed weights, comma-separated (k values ≥ 0 summing to 1).
@@ -65,7 +74,7 @@ pub struct GenerateArgs {
     pub latent_noise: f64,
     /// Smallest accepted Chamfer distance (unit-ball coordinates) to the nearest training
     /// shape: closer shapes are redrawn up to 10 times, then the most novel draw is kept and
-    /// flagged `novelty_met: false` in its provenance.
+    /// flagged `novelty_met: false` in its record.
     #[arg(long)]
     pub min_novelty: Option<f64>,
     /// Target range of an anatomical measurement, `NAME=MIN:MAX` in mm (either bound may be
@@ -85,10 +94,10 @@ pub struct GenerateArgs {
     /// Number of shapes.
     #[arg(long, default_value_t = 1)]
     pub count: u64,
-    /// Seed of the index and weight draws (same seed → same cohort).
+    /// Seed of the cohort (same seed → same cohort, here and through the API).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Grid samples per axis over [-1,1]³.
+    /// Grid samples per axis over [-1,1]³ (32–1024).
     #[arg(long, default_value_t = DEFAULT_RESOLUTION)]
     pub resolution: usize,
     /// Mesh file format.
@@ -113,238 +122,103 @@ fn parse_format(s: &str) -> Result<MeshFormat, String> {
     s.parse::<MeshFormat>().map_err(|e| e.to_string())
 }
 
+impl GenerateArgs {
+    /// The request the flags describe, in the pipeline's raw form.
+    fn fields(&self) -> anyhow::Result<CohortFields<String>> {
+        let weights = match &self.weights {
+            Some(text) => Some(parse_weights(text).map_err(|e| anyhow::anyhow!("--weights: {e}"))?),
+            None => None,
+        };
+        let targeted = !self.targets.is_empty();
+        Ok(CohortFields {
+            count: i64::try_from(self.count).unwrap_or(i64::MAX),
+            arity: i64::try_from(self.arity).unwrap_or(i64::MAX),
+            weights,
+            weighting: Some(self.weighting),
+            seed: Some(self.seed),
+            resolution: Some(i64::try_from(self.resolution).unwrap_or(i64::MAX)),
+            latent_noise: Some(self.latent_noise),
+            selection: Some(self.selection),
+            min_novelty: self.min_novelty,
+            targets: targeted.then(|| self.targets.iter().cloned().collect()),
+            max_candidates: targeted.then_some(i64::from(self.max_candidates)),
+            anchors: (!self.anchors.is_empty()).then(|| self.anchors.clone()),
+        })
+    }
+}
+
+/// A request error in the words of the command line: the flag instead of the field.
+fn flag_error(e: RequestError) -> anyhow::Error {
+    let field = e.field.as_str();
+    let flag = match field.split(['.', '[']).next().unwrap_or(field) {
+        "targets" => "--target".to_owned(),
+        "anchors" => "--anchor".to_owned(),
+        name => format!("--{}", name.replace('_', "-")),
+    };
+    anyhow::anyhow!("{flag}: {} (rule {})", e.message, e.rule)
+}
+
 /// Runs `aortagen generate`.
 pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     init_logging();
-    ensure!(
-        (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&args.resolution),
-        "--resolution must be between {MIN_RESOLUTION} and {MAX_RESOLUTION}"
+    let request = CohortRequest::parse(args.fields()?, RequestLimits::NONE, || args.seed)
+        .map_err(flag_error)?;
+    let engine: Arc<dyn Engine> = Arc::new(
+        SdfEngine::new(args.backend)
+            .with_extraction(args.extraction)
+            .with_chamfer_points(args.novelty_points),
     );
-    ensure!(
-        args.latent_noise.is_finite() && args.latent_noise >= 0.0,
-        "--latent-noise must be a finite number ≥ 0"
-    );
-    if let Some(m) = args.min_novelty {
-        ensure!(
-            m.is_finite() && m >= 0.0,
-            "--min-novelty must be a finite number ≥ 0"
-        );
-    }
-    ensure!(
-        (1..=MAX_CANDIDATES).contains(&args.max_candidates),
-        "--max-candidates must be between 1 and {MAX_CANDIDATES}"
-    );
-    let targets = match args.targets.is_empty() {
-        true => None,
-        false => {
-            let ranges = args.targets.iter().cloned().collect();
-            Some(Targets::parse(&ranges).map_err(|e| anyhow::anyhow!("--target: {e}"))?)
-        }
-    };
-    let diversity = Diversity {
-        selection: args.selection,
-        latent_noise: args.latent_noise,
-    };
-    let weights = match &args.weights {
-        Some(text) => Some(parse_weights(text).map_err(|e| anyhow::anyhow!("--weights: {e}"))?),
-        None => None,
-    };
-    let spec = MixSpec {
-        arity: args.arity,
-        weights,
-        weighting: args.weighting,
-    };
-    let model = LoadedModel::load(&args.model, args.backend)?;
-    spec.validate(model.num_shapes())
-        .map_err(|e| anyhow::anyhow!("--{}: {e}", e.field()))?;
-    let anchors = match args.anchors.is_empty() {
-        true => Vec::new(),
-        false => AnchorSet::load(&args.model, &model.manifest)?
-            .pick(&args.anchors, args.arity)
-            .map_err(|e| anyhow::anyhow!("--anchor: {e}"))?,
-    };
+    let info = engine.model_info(&args.model)?;
+    let count = info.training_shape_count();
+    request.check_model(count).map_err(flag_error)?;
+    let manifest = read_manifest(&args.model)?;
+    let anchors = anchor_latents(&args.model, &request)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let latents = model.latents();
-    let units = match args.units {
-        Units::Mm => "mm",
-        Units::Unit => "unit",
+    let cancel = Arc::new(AtomicBool::new(false));
+    tracing::info!(
+        resolution = request.resolution,
+        shapes = count,
+        "reconstructing the training shapes to measure novelty against"
+    );
+    let setup = CohortSetup::compute(&*engine, &args.model, &request, count, &cancel)?;
+    print_target_ranges(&request, &setup);
+    let latents = match request.selection.needs_latents() {
+        true => Some(Arc::new(engine.training_latents(&args.model)?)),
+        false => None,
     };
-    let surfaces = training_surfaces(
-        &model,
-        &latents,
-        args.resolution,
-        args.extraction,
-        &std::sync::atomic::AtomicBool::new(false),
-    )
-    .context("cannot reconstruct the training shapes for the novelty measure")?;
-    let reference = NoveltyReference::new(&surfaces, args.novelty_points)?;
-    let screen_resolution = SCREEN_RESOLUTION.min(args.resolution);
-    let (pool, training) = match &targets {
-        Some(targets) => {
-            let training =
-                measure_training_shapes(&model, &latents, SCREEN_RESOLUTION, args.extraction)
-                    .context("cannot measure the training shapes")?;
-            for (m, range) in targets.iter() {
-                if let Some((lo, hi)) = training_ranges(&training, m) {
-                    println!(
-                        "target {} {range}; training shapes span [{lo:.2}, {hi:.2}] mm",
-                        m.name()
-                    );
-                }
-            }
-            check_feasible(targets, &training).map_err(|e| anyhow::anyhow!("--target: {e}"))?;
-            (guided_pool(targets, &training, args.arity), training)
-        }
-        None => (Vec::new(), Vec::new()),
+    let plan = CohortPlan::new(&request, count, latents, anchors);
+    let handle = EngineHandle {
+        engine,
+        model_dir: args.model.clone(),
+        model_id: manifest.model_id().to_owned(),
+        cancel,
     };
-    let attempts = if args.min_novelty.is_some() {
-        MAX_REDRAWS + 1
-    } else {
-        1
+    let generator = CohortGenerator::new(handle, plan, &request, setup)?;
+    let names: Vec<String> = manifest.shapes.iter().map(|s| s.name.clone()).collect();
+    let writer = ShapeWriter {
+        args: &args,
+        model_sha256: &manifest.weights.sha256,
+        names: &names,
     };
-    let bar = terminal_bar(args.count, "shapes");
+    let bar = terminal_bar(u64::from(request.count), "shapes");
     let mut report = Vec::new();
-    for shape in 0..args.count {
-        let mut best: Option<(GeneratedShape, Novelty, u32)> = None;
-        let mut redraws = 0;
-        let mut searched = None;
-        if let Some(targets) = &targets {
-            let mut source = TargetedShape {
-                model: &model,
-                latents: &latents,
-                spec: &spec,
-                args: &args,
-                anchors: &anchors,
-                reference: &reference,
-                pool: &pool,
-                training: &training,
-                targets,
-                key: (args.seed, shape),
-                screen_resolution,
-            };
-            let outcome = search(
-                targets,
-                args.max_candidates,
-                screen_resolution < args.resolution,
-                &mut source,
-            )
-            .with_context(|| format!("shape {shape}"))?;
-            searched = Some((
-                outcome.candidates,
-                outcome.met,
-                outcome.kept.anatomy.ok(),
-                outcome.refined,
-            ));
-            best = Some(outcome.kept.candidate);
-        }
-        let attempts = if searched.is_some() { 0 } else { attempts };
-        for attempt in 0..attempts {
-            let generated = generate_shape_with(
-                &model,
-                &latents,
-                &spec,
-                diversity,
-                &anchors,
-                (args.seed, shape, attempt),
-                args.resolution,
-                args.extraction,
-            )
-            .with_context(|| format!("shape {shape}"))?;
-            let novelty = reference
-                .novelty(&generated.mesh, args.seed ^ shape)
-                .with_context(|| format!("shape {shape}: novelty"))?;
-            redraws = attempt;
-            if best
-                .as_ref()
-                .is_none_or(|(_, b, _)| novelty.chamfer > b.chamfer)
-            {
-                best = Some((generated, novelty, attempt));
-            }
-            if args.min_novelty.is_none_or(|m| novelty.chamfer >= m) {
-                break;
-            }
-        }
-        let (generated, novelty, attempt) = best.context("no draw was made")?;
-        let novelty_met = args.min_novelty.is_none_or(|m| novelty.chamfer >= m);
-        let provenance = Provenance {
-            selection: diversity.selection,
-            latent_noise: diversity.latent_noise,
-            attempt,
-            novelty: Some(novelty),
-            redraws,
-            novelty_met: Some(novelty_met),
-            candidates: searched.as_ref().map(|s| s.0),
-            targets_met: searched.as_ref().map(|s| s.1),
-            anatomy: searched.as_ref().and_then(|s| s.2.clone()),
-            ..Provenance::new(&model, &generated, args.seed, shape, args.resolution, units)
-        };
-        let mesh = match args.units {
-            Units::Mm => generated.mesh_in_mesh_units(),
-            Units::Unit => generated.mesh.clone(),
-        };
-        let meta = MeshMetadata {
-            extras: serde_json::to_value(&provenance)?,
-            ..MeshMetadata::new(units)
-        };
-        let stem = args.out.join(format!("shape_{shape:04}"));
-        let mesh_path = stem.with_extension(args.format.extension());
-        let bytes = write_mesh(&mesh, args.format, &meta)?;
-        std::fs::write(&mesh_path, bytes)
-            .with_context(|| format!("cannot write {}", mesh_path.display()))?;
-        let json_path = stem.with_extension("json");
-        std::fs::write(&json_path, serde_json::to_vec_pretty(&provenance)?)
-            .with_context(|| format!("cannot write {}", json_path.display()))?;
-        let name = &model.manifest.shapes[novelty.nearest].name;
-        report.push(format!(
-            "shape_{shape:04}: novelty {:.3e} (nearest training shape {} {name}){}{}",
-            novelty.chamfer,
-            novelty.nearest,
-            match redraws {
-                0 => String::new(),
-                r => format!(", {r} redraws"),
-            },
-            if novelty_met {
-                ""
-            } else {
-                ", below --min-novelty"
-            },
-        ));
-        if let (Some(targets), Some((candidates, met, anatomy, refined))) = (&targets, &searched) {
-            let values: Vec<String> = targets
-                .iter()
-                .map(|(m, _)| {
-                    let v = anatomy.as_ref().and_then(|a| m.value(a));
-                    format!(
-                        "{} {}",
-                        m.name(),
-                        v.map_or("unmeasured".into(), |v| format!("{v:.2}"))
-                    )
-                })
-                .collect();
-            let line = report.last_mut().expect("a line was just pushed");
-            line.push_str(&format!(
-                "; {}; {candidates} candidates ({refined} weight refinements), {}",
-                values.join(", "),
-                if *met {
-                    "targets met"
-                } else {
-                    "targets NOT met (closest kept)"
-                }
-            ));
-        }
+    generator.run(0..u64::from(request.count), |shape| -> anyhow::Result<()> {
+        let path = writer.write(&shape)?;
+        report.push(writer.report_line(&shape, &request));
         match &bar {
             Some(bar) => bar.inc(1),
             None => tracing::info!(
-                shape,
-                indices = ?provenance.indices,
-                weights = ?provenance.weights,
-                triangles = mesh.triangles.len(),
-                path = %mesh_path.display(),
+                shape = shape.index,
+                indices = ?shape.spec.training_indices,
+                weights = ?shape.spec.weights,
+                triangles = shape.shape.mesh_unit.triangle_count(),
+                path = %path.display(),
                 "generated"
             ),
         }
-    }
+        Ok(())
+    })?;
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
@@ -352,108 +226,132 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
         println!("{line}");
     }
     println!(
-        "{} shapes from model {} written to {} ({units})",
-        args.count,
-        model.manifest.model_id(),
-        args.out.display()
+        "{} shapes from model {} written to {} ({})",
+        request.count,
+        manifest.model_id(),
+        args.out.display(),
+        args.units.name()
     );
     Ok(())
 }
 
-/// The candidates of one targeted shape: mixtures drawn (and weight-refined) from the
-/// command line's spec, meshed by the loaded model. A spec keeps its draw's attempt, which
-/// seeds the latent noise, so a refinement changes only the weights.
-struct TargetedShape<'a> {
-    model: &'a LoadedModel,
-    latents: &'a [Vec<f32>],
-    spec: &'a MixSpec,
-    args: &'a GenerateArgs,
-    anchors: &'a [Anchor],
-    reference: &'a NoveltyReference,
-    pool: &'a [usize],
-    training: &'a [Option<ShapeAnatomy>],
-    targets: &'a Targets,
-    /// (seed, shape index).
-    key: (u64, u64),
-    screen_resolution: usize,
-}
-
-impl TargetedShape<'_> {
-    fn mesh(
-        &self,
-        (mixture, attempt): &(Mixture, u32),
-        resolution: usize,
-    ) -> anyhow::Result<GeneratedShape> {
-        let (seed, shape) = self.key;
-        Ok(generate_from_mixture(
-            self.model,
-            self.latents,
-            mixture.clone(),
-            self.args.latent_noise,
-            self.anchors,
-            (seed, shape, *attempt),
-            resolution,
-            self.args.extraction,
-        )?)
+/// The request's anchors, by name, from the model's `anchors.json`.
+fn anchor_latents(
+    dir: &Path,
+    request: &CohortRequest<String>,
+) -> anyhow::Result<Vec<AnchorLatent>> {
+    if request.anchors.is_empty() {
+        return Ok(Vec::new());
     }
-}
-
-impl CandidateSource for TargetedShape<'_> {
-    type Spec = (Mixture, u32);
-    type Kept = (GeneratedShape, Novelty, u32);
-    type Error = anyhow::Error;
-
-    fn draw(&mut self, attempt: u32) -> anyhow::Result<(Mixture, u32)> {
-        let (seed, shape) = self.key;
-        let key = (seed, shape, attempt);
-        let mixture =
-            candidate_mixture(self.spec, self.latents, self.args.selection, key, self.pool)?;
-        Ok((mixture, attempt))
-    }
-
-    /// Only drawn weights are refined: `--weights` and `--weighting equal` are kept.
-    fn refine(
-        &mut self,
-        (mixture, attempt): &(Mixture, u32),
-        measured: &ShapeAnatomy,
-    ) -> Option<(Mixture, u32)> {
-        if self.spec.weights.is_some() || self.spec.weighting != Weighting::Dirichlet {
-            return None;
-        }
-        let parts = mixture.indices.len().saturating_sub(self.anchors.len());
-        let weights = refine_weights(
-            self.targets,
-            self.training,
-            &mixture.indices[..parts],
-            &mixture.weights,
-            measured,
-        )?;
-        let refined = Mixture {
-            indices: mixture.indices.clone(),
-            weights,
-        };
-        Some((refined, *attempt))
-    }
-
-    fn screen(&mut self, spec: &(Mixture, u32)) -> anyhow::Result<Result<ShapeAnatomy, String>> {
-        let g = self.mesh(spec, self.screen_resolution)?;
-        Ok(measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string()))
-    }
-
-    /// Keeps the draw's attempt, which with the weights in the provenance reproduces it.
-    fn finalize(
-        &mut self,
-        _: u32,
-        spec: &(Mixture, u32),
-    ) -> anyhow::Result<Measured<(GeneratedShape, Novelty, u32)>> {
-        let g = self.mesh(spec, self.args.resolution)?;
-        let novelty = self.reference.novelty(&g.mesh, self.key.0 ^ self.key.1)?;
-        let anatomy = measure_shape(&g.mesh_in_mesh_units()).map_err(|e| e.to_string());
-        Ok(Measured {
-            rank: novelty.chamfer,
-            accept: self.args.min_novelty.is_none_or(|m| novelty.chamfer >= m),
-            candidate: (g, novelty, spec.1),
-            anatomy,
+    let manifest = read_manifest(dir)?;
+    let picked = AnchorSet::load(dir, &manifest)?
+        .pick(&request.anchors, request.arity)
+        .map_err(|e| anyhow::anyhow!("--anchor: {e}"))?;
+    Ok(picked
+        .into_iter()
+        .map(|a| AnchorLatent {
+            name: a.name,
+            latent: a.latent,
+            transform: a.transform,
         })
+        .collect())
+}
+
+/// Prints each target beside the range the training shapes span.
+fn print_target_ranges(request: &CohortRequest<String>, setup: &CohortSetup) {
+    let (Some(search), Some(training)) = (&request.targets, &setup.training) else {
+        return;
+    };
+    for (m, range) in search.targets.iter() {
+        if let Some((lo, hi)) = training_ranges(&training.shapes, m) {
+            println!(
+                "target {} {range}; training shapes span [{lo:.2}, {hi:.2}] mm",
+                m.name()
+            );
+        }
+    }
+}
+
+/// Writes generated shapes with their records.
+struct ShapeWriter<'a> {
+    args: &'a GenerateArgs,
+    model_sha256: &'a str,
+    names: &'a [String],
+}
+
+impl ShapeWriter<'_> {
+    /// Writes `shape_NNNN.<format>` and `shape_NNNN.json`; returns the mesh's path.
+    fn write(&self, shape: &CohortShape) -> anyhow::Result<PathBuf> {
+        let units = self.args.units;
+        let record = ShapeRecord::new(shape, self.model_sha256, self.names, units.name());
+        let mesh = match units {
+            Units::Mm => shape
+                .shape
+                .transform
+                .mesh_to_mesh_units(&shape.shape.mesh_unit),
+            Units::Unit => shape.shape.mesh_unit.clone(),
+        };
+        let meta = MeshMetadata {
+            extras: serde_json::to_value(&record)?,
+            ..MeshMetadata::new(units.name())
+        };
+        let stem = self.args.out.join(format!("shape_{:04}", shape.index));
+        let mesh_path = stem.with_extension(self.args.format.extension());
+        let bytes = write_mesh(&mesh, self.args.format, &meta)?;
+        std::fs::write(&mesh_path, bytes)
+            .with_context(|| format!("cannot write {}", mesh_path.display()))?;
+        let json_path = stem.with_extension("json");
+        std::fs::write(&json_path, serde_json::to_vec_pretty(&record)?)
+            .with_context(|| format!("cannot write {}", json_path.display()))?;
+        Ok(mesh_path)
+    }
+
+    /// One line of the summary printed at the end.
+    fn report_line(&self, shape: &CohortShape, request: &CohortRequest<String>) -> String {
+        let novelty = shape.novelty;
+        let name = self.names.get(novelty.nearest).map_or("", String::as_str);
+        let mut line = format!(
+            "shape_{:04}: novelty {:.3e} (nearest training shape {} {name}){}{}",
+            shape.index,
+            novelty.chamfer,
+            novelty.nearest,
+            match shape.redraws {
+                0 => String::new(),
+                r => format!(", {r} redraws"),
+            },
+            if shape.novelty_met {
+                ""
+            } else {
+                ", below --min-novelty"
+            },
+        );
+        let (Some(search), Some(candidates), Some(met)) = (
+            &request.targets,
+            shape.provenance.candidates,
+            shape.provenance.targets_met,
+        ) else {
+            return line;
+        };
+        let anatomy = shape.anatomy.as_ref().ok();
+        let values: Vec<String> = search
+            .targets
+            .iter()
+            .map(|(m, _)| {
+                let v = anatomy.and_then(|a| m.value(a));
+                let v = v.map_or("unmeasured".into(), |v| format!("{v:.2}"));
+                format!("{} {v}", m.name())
+            })
+            .collect();
+        line.push_str(&format!(
+            "; {}; {candidates} candidates ({} weight refinements), {}",
+            values.join(", "),
+            shape.refinements.unwrap_or(0),
+            if met {
+                "targets met"
+            } else {
+                "targets NOT met (closest kept)"
+            }
+        ));
+        line
     }
 }

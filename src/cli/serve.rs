@@ -4,7 +4,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::config::Config;
-use crate::jobs::engine::CohortEngine;
+use crate::engine::Engine;
 use crate::sdf::backend::Backend;
 use crate::startup::{Application, shutdown_signal};
 
@@ -36,6 +36,6 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
 }
 
 /// The science engine the service runs on: the trained SDF models.
-fn engine() -> Arc<dyn CohortEngine> {
+fn engine() -> Arc<dyn Engine> {
     Arc::new(crate::engine::SdfEngine::new(Backend::default()))
 }

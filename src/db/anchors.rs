@@ -4,6 +4,8 @@
 use serde::Serialize;
 use sqlx::{SqliteConnection, SqlitePool};
 
+use super::states::AnchorStatus;
+
 /// An anchor row (the latent decoded from its blob).
 #[derive(Debug, Clone, Serialize, sqlx::FromRow)]
 pub struct AnchorRow {
@@ -15,8 +17,8 @@ pub struct AnchorRow {
     pub job_id: i64,
     /// Unique per model.
     pub name: String,
-    /// fitting | ready | failed.
-    pub status: String,
+    /// Where it stands.
+    pub status: AnchorStatus,
     /// Uploaded file name.
     pub source_name: String,
     /// Where the uploaded bytes are kept for the job.
@@ -80,6 +82,8 @@ macro_rules! select_anchor {
 /// What a fit request stores before its job runs.
 #[derive(Debug, Clone)]
 pub struct NewAnchor<'a> {
+    /// Its id, allocated in the same transaction ([`next_id`]).
+    pub anchor_id: i64,
     /// Model id.
     pub model_id: &'a str,
     /// The fit job.
@@ -97,11 +101,13 @@ pub struct NewAnchor<'a> {
 }
 
 /// Inserts a `fitting` anchor inside the caller's transaction; returns its id.
-pub async fn insert(conn: &mut SqliteConnection, a: &NewAnchor<'_>) -> sqlx::Result<i64> {
-    sqlx::query_scalar(
-        "insert into anchor (model_id, job_id, name, source_name, source_path, iterations, seed)
-         values (?, ?, ?, ?, ?, ?, ?) returning anchor_id",
+pub async fn insert(conn: &mut SqliteConnection, a: &NewAnchor<'_>) -> sqlx::Result<()> {
+    sqlx::query(
+        "insert into anchor (anchor_id, model_id, job_id, name, source_name, source_path,
+             iterations, seed)
+         values (?, ?, ?, ?, ?, ?, ?, ?)",
     )
+    .bind(a.anchor_id)
     .bind(a.model_id)
     .bind(a.job_id)
     .bind(a.name)
@@ -109,8 +115,17 @@ pub async fn insert(conn: &mut SqliteConnection, a: &NewAnchor<'_>) -> sqlx::Res
     .bind(a.source_path)
     .bind(a.iterations)
     .bind(a.seed)
-    .fetch_one(conn)
-    .await
+    .execute(conn)
+    .await?;
+    Ok(())
+}
+
+/// The id the next anchor gets: one above the largest (inside the caller's write
+/// transaction, so no other writer takes it), known before the fit job that refers to it.
+pub async fn next_id(conn: &mut SqliteConnection) -> sqlx::Result<i64> {
+    sqlx::query_scalar("select coalesce(max(anchor_id), 0) + 1 from anchor")
+        .fetch_one(conn)
+        .await
 }
 
 /// Records a successful fit.

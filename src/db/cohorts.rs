@@ -1,43 +1,34 @@
 //! The `cohort` table. A cohort's state and progress are its job's, so reads join `job`.
 
+use std::collections::BTreeMap;
+
+use sqlx::types::Json;
 use sqlx::{SqliteConnection, SqlitePool};
 
-/// What a new cohort row holds (already validated).
+use super::states::JobStatus;
+use crate::cohort::targets::TargetRange;
+use crate::cohort::{
+    CohortFields, CohortRequest, RequestError, RequestLimits, Selection, Weighting,
+};
+
+/// A new cohort row: a parsed request and how it arrived.
 #[derive(Debug, Clone)]
 pub struct NewCohort<'a> {
+    /// Its id, allocated in the same transaction ([`next_id`]).
+    pub cohort_id: i64,
     /// Model to sample from.
     pub model_id: &'a str,
     /// Job that generates it.
     pub job_id: i64,
-    /// Number of shapes.
-    pub count: i64,
-    /// Training shapes mixed per generated shape.
-    pub arity: i64,
-    /// `equal` or `dirichlet`.
-    pub weighting: &'a str,
-    /// Explicit weights, when given.
-    pub weights: Option<&'a [f64]>,
-    /// Seed actually used.
-    pub seed: i64,
-    /// Marching-cubes resolution.
-    pub resolution: i64,
-    /// Latent noise in training standard deviations.
-    pub latent_noise: f64,
-    /// `uniform` or `spread`.
-    pub selection: &'a str,
-    /// Smallest accepted Chamfer distance to a training shape.
-    pub min_novelty: Option<f64>,
-    /// Target ranges of anatomical measurements (JSON), if any.
-    pub targets: Option<&'a str>,
-    /// Most candidates per shape when targets are set.
-    pub max_candidates: Option<i64>,
+    /// The request (anchors by id).
+    pub request: &'a CohortRequest<i64>,
     /// Client-chosen retry key.
     pub idempotency_key: Option<&'a str>,
     /// Hash of the canonical request.
     pub request_hash: &'a str,
 }
 
-/// A cohort with its job's state.
+/// A cohort with its job's state, its request's fields typed as stored.
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct CohortRow {
     /// Primary key.
@@ -51,9 +42,9 @@ pub struct CohortRow {
     /// Arity.
     pub arity: i64,
     /// Weighting strategy.
-    pub weighting: String,
-    /// Explicit weights (JSON), if any.
-    pub weights: Option<String>,
+    pub weighting: Weighting,
+    /// Explicit weights, if any.
+    pub weights: Option<Json<Vec<f64>>>,
     /// Seed used.
     pub seed: i64,
     /// Resolution.
@@ -61,13 +52,13 @@ pub struct CohortRow {
     /// Latent noise in training standard deviations.
     pub latent_noise: f64,
     /// Selection strategy of the mixed latents.
-    pub selection: String,
+    pub selection: Selection,
     /// Smallest accepted Chamfer distance to a training shape.
     pub min_novelty: Option<f64>,
     /// Redraws over the stored shapes.
     pub redraws_total: i64,
-    /// Target ranges of anatomical measurements (JSON), if any.
-    pub targets: Option<String>,
+    /// Target ranges of anatomical measurements, if any.
+    pub targets: Option<Json<BTreeMap<String, TargetRange>>>,
     /// Most candidates per shape when targets are set.
     pub max_candidates: Option<i64>,
     /// Candidates drawn over the stored shapes (targeted cohorts).
@@ -77,7 +68,7 @@ pub struct CohortRow {
     /// Hash of the request (idempotency checks).
     pub request_hash: String,
     /// The job's status.
-    pub status: String,
+    pub status: JobStatus,
     /// Shapes committed so far.
     pub shapes_done: i64,
     /// The job's error, when failed.
@@ -88,8 +79,29 @@ pub struct CohortRow {
     pub started_at: Option<String>,
     /// When work ended.
     pub finished_at: Option<String>,
-    /// Anchor ids forced into every shape (JSON array from `cohort_anchor`), if any.
-    pub anchors: Option<String>,
+    /// Anchor ids forced into every shape (from `cohort_anchor`), if any.
+    pub anchors: Option<Json<Vec<i64>>>,
+}
+
+impl CohortRow {
+    /// The request the row stores, parsed by the rules it was accepted under.
+    pub fn request(&self) -> Result<CohortRequest<i64>, RequestError> {
+        let fields = CohortFields {
+            count: self.count,
+            arity: self.arity,
+            weights: self.weights.as_ref().map(|w| w.0.clone()),
+            weighting: Some(self.weighting),
+            seed: Some(self.seed as u64),
+            resolution: Some(self.resolution),
+            latent_noise: Some(self.latent_noise),
+            selection: Some(self.selection),
+            min_novelty: self.min_novelty,
+            targets: self.targets.as_ref().map(|t| t.0.clone()),
+            max_candidates: self.max_candidates,
+            anchors: self.anchors.as_ref().map(|a| a.0.clone()),
+        };
+        CohortRequest::parse(fields, RequestLimits::NONE, || self.seed as u64)
+    }
 }
 
 const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity, c.weighting,
@@ -109,34 +121,46 @@ const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity
             as anchors
     from cohort c join job j on j.job_id = c.job_id";
 
-/// Inserts a cohort inside the caller's transaction and returns its id.
-pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Result<i64> {
-    let weights = c
-        .weights
-        .map(|w| serde_json::to_string(w).expect("f64 slices serialise"));
-    sqlx::query_scalar(
-        "insert into cohort (model_id, job_id, count, arity, weighting, weights, seed,
-             resolution, latent_noise, selection, min_novelty, idempotency_key, request_hash,
-             targets, max_candidates)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) returning cohort_id",
+/// The id the next cohort gets: one above the largest (inside the caller's write
+/// transaction, so no other writer takes it), known before the job that refers to it.
+pub async fn next_id(conn: &mut SqliteConnection) -> sqlx::Result<i64> {
+    sqlx::query_scalar("select coalesce(max(cohort_id), 0) + 1 from cohort")
+        .fetch_one(conn)
+        .await
+}
+
+/// Inserts a cohort inside the caller's transaction.
+pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Result<()> {
+    let r = c.request;
+    let targets = r.targets.as_ref().map(|t| Json(t.targets.to_map()));
+    sqlx::query(
+        "insert into cohort (cohort_id, model_id, job_id, count, arity, weighting, weights,
+             seed, resolution, latent_noise, selection, min_novelty, idempotency_key,
+             request_hash, targets, max_candidates)
+         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
     )
+    .bind(c.cohort_id)
     .bind(c.model_id)
     .bind(c.job_id)
-    .bind(c.count)
-    .bind(c.arity)
-    .bind(c.weighting)
-    .bind(weights)
-    .bind(c.seed)
-    .bind(c.resolution)
-    .bind(c.latent_noise)
-    .bind(c.selection)
-    .bind(c.min_novelty)
+    .bind(i64::from(r.count))
+    .bind(r.arity as i64)
+    .bind(r.weights.weighting())
+    .bind(r.weights.fixed().map(|w| Json(w.to_vec())))
+    .bind(r.seed as i64)
+    .bind(r.resolution as i64)
+    .bind(r.latent_noise)
+    .bind(r.selection)
+    .bind(r.min_novelty)
     .bind(c.idempotency_key)
     .bind(c.request_hash)
-    .bind(c.targets)
-    .bind(c.max_candidates)
-    .fetch_one(conn)
-    .await
+    .bind(targets)
+    .bind(r.targets.as_ref().map(|t| i64::from(t.max_candidates)))
+    .execute(&mut *conn)
+    .await?;
+    if !r.anchors.is_empty() {
+        super::anchors::set_cohort_anchors(conn, c.cohort_id, &r.anchors).await?;
+    }
+    Ok(())
 }
 
 /// One cohort by id.
@@ -161,7 +185,7 @@ pub async fn find_by_idempotency_key(
 pub async fn list(
     pool: &SqlitePool,
     model_id: Option<&str>,
-    status: Option<&str>,
+    status: Option<JobStatus>,
     limit: i64,
     offset: i64,
 ) -> sqlx::Result<Vec<CohortRow>> {

@@ -4,17 +4,19 @@
 use serde::Serialize;
 use sqlx::{SqliteConnection, SqlitePool};
 
+use super::states::{JobKind, JobStatus};
+
 /// A job row as the API reports it.
 #[derive(Debug, Clone, Serialize, sqlx::FromRow)]
 pub struct JobRow {
     /// Primary key.
     pub job_id: i64,
-    /// `cohort` or `training`.
-    pub kind: String,
+    /// What it does.
+    pub kind: JobKind,
     /// JSON payload.
     pub payload: String,
-    /// queued | running | succeeded | failed | cancelled.
-    pub status: String,
+    /// Where it stands.
+    pub status: JobStatus,
     /// How many times a worker claimed it.
     pub attempts: i64,
     /// Units of work done.
@@ -38,9 +40,9 @@ pub struct JobRow {
 pub struct ClaimedJob {
     /// Primary key.
     pub job_id: i64,
-    /// `cohort` or `training`.
-    pub kind: String,
-    /// JSON payload.
+    /// What it does.
+    pub kind: JobKind,
+    /// JSON payload (typed by [`crate::jobs::Job`]).
     pub payload: String,
     /// Claims so far, this one included.
     pub attempts: i64,
@@ -59,27 +61,28 @@ pub enum FinalStatus {
 
 impl FinalStatus {
     /// The `status` column value.
-    pub fn as_str(self) -> &'static str {
+    pub fn status(self) -> JobStatus {
         match self {
-            Self::Succeeded => "succeeded",
-            Self::Failed => "failed",
-            Self::Cancelled => "cancelled",
+            Self::Succeeded => JobStatus::Succeeded,
+            Self::Failed => JobStatus::Failed,
+            Self::Cancelled => JobStatus::Cancelled,
         }
     }
 }
 
-/// Adds a queued job inside the caller's transaction and returns its id.
+/// Adds a queued job inside the caller's transaction and returns its id (only
+/// [`crate::jobs::queue`] calls it, with a typed payload).
 pub async fn enqueue(
     conn: &mut SqliteConnection,
-    kind: &str,
-    payload: &serde_json::Value,
+    kind: JobKind,
+    payload: &str,
     progress_total: i64,
 ) -> sqlx::Result<i64> {
     sqlx::query_scalar(
         "insert into job (kind, payload, progress_total) values (?, ?, ?) returning job_id",
     )
     .bind(kind)
-    .bind(payload.to_string())
+    .bind(payload)
     .bind(progress_total)
     .fetch_one(conn)
     .await
@@ -163,7 +166,7 @@ pub async fn finish(
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
          where job_id = ?",
     )
-    .bind(status.as_str())
+    .bind(status.status())
     .bind(error)
     .bind(job_id)
     .execute(pool)
@@ -252,22 +255,8 @@ pub async fn count_pending<'e>(ex: impl sqlx::SqliteExecutor<'e>) -> sqlx::Resul
         .await
 }
 
-/// Replaces a job's payload (inside the transaction that created its subject).
-pub async fn set_payload(
-    conn: &mut SqliteConnection,
-    job_id: i64,
-    payload: &serde_json::Value,
-) -> sqlx::Result<()> {
-    sqlx::query("update job set payload = ? where job_id = ?")
-        .bind(payload.to_string())
-        .bind(job_id)
-        .execute(conn)
-        .await?;
-    Ok(())
-}
-
 /// Number of jobs in each state (for /metrics).
-pub async fn count_by_status(pool: &SqlitePool) -> sqlx::Result<Vec<(String, i64)>> {
+pub async fn count_by_status(pool: &SqlitePool) -> sqlx::Result<Vec<(JobStatus, i64)>> {
     sqlx::query_as("select status, count(*) from job group by status order by status")
         .fetch_all(pool)
         .await

@@ -6,9 +6,9 @@ pub mod anchors;
 pub mod cohort_metrics;
 pub mod cohorts;
 pub mod jobs;
-pub mod mesh_blob;
 pub mod models;
 pub mod shapes;
+pub mod states;
 
 use std::str::FromStr;
 use std::sync::Arc;

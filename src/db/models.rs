@@ -1,7 +1,12 @@
 //! The `model` table: the registry of generative models cohorts can be drawn from.
 
 use serde::Serialize;
+use sqlx::types::Json;
 use sqlx::{SqliteConnection, SqlitePool};
+
+use super::states::ModelStatus;
+use crate::cohort::targets::feasibility::TrainingAnatomy;
+use crate::engine::ModelInfo;
 
 /// A registered model.
 #[derive(Debug, Clone, Serialize, sqlx::FromRow)]
@@ -10,12 +15,19 @@ pub struct ModelRow {
     pub model_id: String,
     /// Directory the engine loads it from.
     pub dir_path: String,
-    /// Engine-reported facts as JSON ([`crate::jobs::engine::ModelInfo`]).
-    pub manifest: String,
-    /// training | ready | failed.
-    pub status: String,
+    /// Engine-reported facts; null until its training succeeds.
+    pub manifest: Json<Option<ModelInfo>>,
+    /// Where it stands.
+    pub status: ModelStatus,
     /// Registration time.
     pub created_at: String,
+}
+
+impl ModelRow {
+    /// The engine's facts about the model (none while it trains or after it failed).
+    pub fn info(&self) -> Option<&ModelInfo> {
+        self.manifest.0.as_ref()
+    }
 }
 
 /// Registers a model unless the id is taken; returns whether a row was inserted.
@@ -23,8 +35,8 @@ pub async fn insert_if_absent(
     conn: &mut SqliteConnection,
     model_id: &str,
     dir_path: &str,
-    manifest: &serde_json::Value,
-    status: &str,
+    manifest: Option<&ModelInfo>,
+    status: ModelStatus,
 ) -> sqlx::Result<bool> {
     let done = sqlx::query(
         "insert into model (model_id, dir_path, manifest, status) values (?, ?, ?, ?)
@@ -32,7 +44,7 @@ pub async fn insert_if_absent(
     )
     .bind(model_id)
     .bind(dir_path)
-    .bind(manifest.to_string())
+    .bind(Json(manifest))
     .bind(status)
     .execute(conn)
     .await?;
@@ -43,8 +55,8 @@ pub async fn insert_if_absent(
 pub async fn set_trained(
     pool: &SqlitePool,
     model_id: &str,
-    status: &str,
-    manifest: Option<&serde_json::Value>,
+    status: ModelStatus,
+    manifest: Option<&ModelInfo>,
 ) -> sqlx::Result<()> {
     sqlx::query(
         "update model set status = ?, manifest = coalesce(?, manifest),
@@ -52,7 +64,7 @@ pub async fn set_trained(
          where model_id = ?",
     )
     .bind(status)
-    .bind(manifest.map(|m| m.to_string()))
+    .bind(manifest.map(Json))
     .bind(model_id)
     .execute(pool)
     .await?;
@@ -96,23 +108,27 @@ pub async fn delete(pool: &SqlitePool, model_id: &str) -> sqlx::Result<bool> {
     Ok(done.rows_affected() == 1)
 }
 
-/// The model's stored training-shape measurements (JSON), if computed.
-pub async fn training_anatomy(pool: &SqlitePool, model_id: &str) -> sqlx::Result<Option<String>> {
-    sqlx::query_scalar("select training_anatomy from model where model_id = ?")
-        .bind(model_id)
-        .fetch_optional(pool)
-        .await
-        .map(Option::flatten)
+/// The model's stored training-shape measurements, if computed.
+pub async fn training_anatomy(
+    pool: &SqlitePool,
+    model_id: &str,
+) -> sqlx::Result<Option<TrainingAnatomy>> {
+    let stored: Option<Option<Json<TrainingAnatomy>>> =
+        sqlx::query_scalar("select training_anatomy from model where model_id = ?")
+            .bind(model_id)
+            .fetch_optional(pool)
+            .await?;
+    Ok(stored.flatten().map(|j| j.0))
 }
 
-/// Stores the model's training-shape measurements (JSON).
+/// Stores the model's training-shape measurements.
 pub async fn set_training_anatomy(
     pool: &SqlitePool,
     model_id: &str,
-    json: &str,
+    measured: &TrainingAnatomy,
 ) -> sqlx::Result<()> {
     sqlx::query("update model set training_anatomy = ? where model_id = ?")
-        .bind(json)
+        .bind(Json(measured))
         .bind(model_id)
         .execute(pool)
         .await?;

@@ -1,6 +1,10 @@
 //! The `shape` table: generated shapes with provenance, measures and the stored mesh.
 
+use sqlx::types::Json;
 use sqlx::{SqliteConnection, SqlitePool};
+
+use crate::anatomy::shape::ShapeAnatomy;
+use crate::cohort::Selection;
 
 /// A shape to commit (with its mesh blob) in the job's per-shape transaction.
 #[derive(Debug, Clone)]
@@ -31,14 +35,14 @@ pub struct NewShape<'a> {
     pub centre: [f64; 3],
     /// Unit-ball → mm scale.
     pub radius: f64,
-    /// Encoded unit-ball mesh ([`super::mesh_blob`]).
+    /// Encoded unit-ball mesh ([`crate::formats::mesh_blob`]).
     pub mesh: &'a [u8],
     /// Hex SHA-256 of `mesh`.
     pub mesh_sha256: &'a str,
     /// Latent noise it was drawn with.
     pub latent_noise: f64,
     /// Selection strategy it was drawn with.
-    pub selection: &'a str,
+    pub selection: Selection,
     /// Which draw was kept.
     pub attempt: i64,
     /// Draws rejected as too close to a training shape.
@@ -49,8 +53,8 @@ pub struct NewShape<'a> {
     pub nearest_training_index: Option<i64>,
     /// Whether the cohort's min_novelty is met (true when there is none).
     pub novelty_met: Option<bool>,
-    /// Anatomical measurements (JSON), when they succeeded.
-    pub anatomy: Option<&'a str>,
+    /// Anatomical measurements, when they succeeded.
+    pub anatomy: Option<&'a ShapeAnatomy>,
     /// Why the measurements failed.
     pub anatomy_error: Option<&'a str>,
     /// Candidates drawn (targeted cohorts).
@@ -70,10 +74,10 @@ pub struct ShapeRow {
     pub model_id: String,
     /// Position within the cohort.
     pub shape_index: i64,
-    /// JSON array of training indices.
-    pub training_indices: String,
-    /// JSON array of weights.
-    pub weights: String,
+    /// Training indices mixed.
+    pub training_indices: Json<Vec<usize>>,
+    /// Their weights, then the anchors'.
+    pub weights: Json<Vec<f64>>,
     /// Per-shape seed.
     pub seed: i64,
     /// Resolution.
@@ -101,7 +105,7 @@ pub struct ShapeRow {
     /// Latent noise it was drawn with.
     pub latent_noise: f64,
     /// Selection strategy it was drawn with.
-    pub selection: String,
+    pub selection: Selection,
     /// Which draw was kept.
     pub attempt: i64,
     /// Draws rejected as too close to a training shape.
@@ -112,8 +116,8 @@ pub struct ShapeRow {
     pub nearest_training_index: Option<i64>,
     /// Whether the cohort's min_novelty is met.
     pub novelty_met: Option<bool>,
-    /// Anatomical measurements (JSON).
-    pub anatomy: Option<String>,
+    /// Anatomical measurements.
+    pub anatomy: Option<Json<ShapeAnatomy>>,
     /// Why the measurements failed.
     pub anatomy_error: Option<String>,
     /// Candidates drawn (targeted cohorts).
@@ -122,8 +126,12 @@ pub struct ShapeRow {
     pub targets_met: Option<bool>,
     /// Commit time.
     pub created_at: String,
-    /// Anchors mixed (JSON array of ids from `shape_anchor`), if any.
-    pub anchor_ids: Option<String>,
+    /// Anchors mixed (ids from `shape_anchor`, in mixture order), if any.
+    pub anchor_ids: Option<Json<Vec<i64>>>,
+    /// Their names, in the same order.
+    pub anchor_names: Option<Json<Vec<String>>>,
+    /// The owning cohort's seed.
+    pub cohort_seed: i64,
 }
 
 /// A shape's stored mesh and the transform to mm.
@@ -153,13 +161,16 @@ const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
         s.novelty_met, s.anatomy, s.anatomy_error, s.candidates, s.targets_met, s.created_at,
         (select json_group_array(anchor_id) from (select anchor_id from shape_anchor a
             where a.shape_id = s.shape_id order by a.position) having count(*) > 0)
-            as anchor_ids
+            as anchor_ids,
+        (select json_group_array(name) from (select n.name from shape_anchor a
+            join anchor n on n.anchor_id = a.anchor_id
+            where a.shape_id = s.shape_id order by a.position) having count(*) > 0)
+            as anchor_names,
+        c.seed as cohort_seed
     from shape s join cohort c on c.cohort_id = s.cohort_id";
 
 /// Inserts a shape inside the caller's transaction.
 pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Result<i64> {
-    let indices = serde_json::to_string(s.training_indices).expect("integers serialise");
-    let weights = serde_json::to_string(s.weights).expect("finite floats serialise");
     sqlx::query_scalar(
         "insert into shape (cohort_id, shape_index, training_indices, weights, seed, resolution,
              software_version, vertex_count, triangle_count, area_mm2, volume_mm3,
@@ -172,8 +183,8 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
     )
     .bind(s.cohort_id)
     .bind(s.shape_index)
-    .bind(indices)
-    .bind(weights)
+    .bind(Json(s.training_indices))
+    .bind(Json(s.weights))
     .bind(s.seed)
     .bind(s.resolution)
     .bind(s.software_version)
@@ -194,7 +205,7 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
     .bind(s.novelty_cd)
     .bind(s.nearest_training_index)
     .bind(s.novelty_met)
-    .bind(s.anatomy)
+    .bind(s.anatomy.map(Json))
     .bind(s.anatomy_error)
     .bind(s.candidates)
     .bind(s.targets_met)
@@ -304,8 +315,8 @@ pub struct ScienceRow {
     pub novelty_met: Option<bool>,
     /// Draws rejected as too close to a training shape.
     pub redraws: i64,
-    /// Anatomical measurements (JSON).
-    pub anatomy: Option<String>,
+    /// Anatomical measurements.
+    pub anatomy: Option<Json<ShapeAnatomy>>,
     /// Candidates drawn (targeted cohorts).
     pub candidates: Option<i64>,
     /// Whether the kept shape meets every target (targeted cohorts).

@@ -11,6 +11,7 @@ mod error;
 mod format;
 mod gltf;
 mod gltf_write;
+pub mod mesh_blob;
 mod metadata;
 mod obj;
 mod ply;

@@ -12,13 +12,15 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
-use super::extract::{ApiQuery, parse_id};
+use super::extractors::{ApiQuery, parse_id};
 use super::model_upload::{
     body_error, is_zip_body, mesh_format, parse_number, unpack_blocking, validate_mesh,
 };
 use super::upload_archive::{ArchiveLimits, looks_like_zip};
+use crate::db::states::{AnchorStatus, JobStatus, ModelStatus};
 use crate::db::{self, anchors::AnchorRow};
-use crate::jobs::engine::FitSpec;
+use crate::engine::FitSpec;
+use crate::jobs::Job;
 use crate::jobs::fit::FitPayload;
 use crate::sdf::fit::{DEFAULT_FIT_ITERATIONS, MAX_FIT_ITERATIONS};
 
@@ -98,7 +100,7 @@ pub struct AnchorView {
     /// Unique per model.
     pub name: String,
     /// fitting | ready | failed.
-    pub status: String,
+    pub status: AnchorStatus,
     /// Uploaded file name.
     pub source_name: String,
     /// Adam steps.
@@ -123,13 +125,15 @@ pub struct AnchorView {
 }
 
 impl AnchorView {
-    fn from_row(row: AnchorRow, job_status: Option<&str>) -> Self {
+    fn from_row(row: AnchorRow, job_status: Option<JobStatus>) -> Self {
         let id = row.anchor_id;
         // A job that ended without recording its outcome (e.g. failed at recovery after
         // repeated crashes) leaves the row `fitting`: the job's state decides.
-        let status = match (row.status.as_str(), job_status) {
-            ("fitting", Some("failed" | "cancelled")) => "failed".to_string(),
-            _ => row.status.clone(),
+        let status = match (row.status, job_status) {
+            (AnchorStatus::Fitting, Some(JobStatus::Failed | JobStatus::Cancelled)) => {
+                AnchorStatus::Failed
+            }
+            (status, _) => status,
         };
         Self {
             latent: row.latent_values(),
@@ -193,7 +197,7 @@ async fn fit_model(
     let model = db::models::get(&state.pool, &model_id)
         .await?
         .ok_or_else(|| ApiError::not_found("model", &model_id))?;
-    if model.status != "ready" {
+    if model.status != ModelStatus::Ready {
         return Err(ApiError::Conflict(format!(
             "model {model_id:?} is {}; only a ready model can be fitted",
             model.status
@@ -215,10 +219,10 @@ async fn fit_model(
         .map_err(anyhow::Error::from)??;
     let ext = mesh_format(&file_name, &bytes).map_or("mesh", |f| f.extension());
 
-    let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
+    let mut submission = state.queue.begin().await?;
     let name = match &upload.name {
         Some(name) => {
-            if db::anchors::get_by_name(&mut tx, &model_id, name)
+            if db::anchors::get_by_name(submission.conn(), &model_id, name)
                 .await?
                 .is_some()
             {
@@ -228,27 +232,30 @@ async fn fit_model(
             }
             name.clone()
         }
-        None => free_name(&mut tx, &model_id, &file_name).await?,
+        None => free_name(submission.conn(), &model_id, &file_name).await?,
     };
-    let pending = db::jobs::count_pending(&mut *tx).await?;
-    if pending >= state.config.max_queue {
-        return Err(ApiError::QueueFull {
-            pending,
-            retry_after: state.config.retry_after_secs,
-        });
-    }
-    let job_id =
-        db::jobs::enqueue(&mut tx, "fit", &serde_json::Value::Null, iterations as i64).await?;
+    let anchor_id = db::anchors::next_id(submission.conn()).await?;
     // Only the format of the client's name is kept: no path from the client reaches the disk.
     let path = state
         .config
         .models_dir
         .join("fits")
-        .join(format!("job-{job_id}.{ext}"));
+        .join(format!("anchor-{anchor_id}.{ext}"));
+    let job = Job::Fit(FitPayload {
+        anchor_id,
+        model_id: model_id.clone(),
+        spec: FitSpec {
+            mesh_path: path.clone(),
+            iterations: iterations as usize,
+            seed: upload.seed,
+        },
+    });
+    let job_id = submission.enqueue(&job, iterations as i64).await?;
     write_source(&path, &bytes).await?;
-    let anchor_id = db::anchors::insert(
-        &mut tx,
+    db::anchors::insert(
+        submission.conn(),
         &db::anchors::NewAnchor {
+            anchor_id,
             model_id: &model_id,
             job_id,
             name: &name,
@@ -259,19 +266,7 @@ async fn fit_model(
         },
     )
     .await?;
-    let payload = FitPayload {
-        anchor_id,
-        model_id: model_id.clone(),
-        spec: FitSpec {
-            mesh_path: path,
-            iterations: iterations as usize,
-            seed: upload.seed,
-        },
-    };
-    let payload = serde_json::to_value(payload).map_err(anyhow::Error::from)?;
-    db::jobs::set_payload(&mut tx, job_id, &payload).await?;
-    tx.commit().await?;
-    state.job_wake.notify_one();
+    submission.commit().await?;
     let body = FitAccepted {
         anchor_id,
         name,
@@ -305,10 +300,7 @@ async fn list_model_anchors(
     let mut views = Vec::with_capacity(rows.len());
     for row in rows {
         let job = db::jobs::get(&state.pool, row.job_id).await?;
-        views.push(AnchorView::from_row(
-            row,
-            job.as_ref().map(|j| j.status.as_str()),
-        ));
+        views.push(AnchorView::from_row(row, job.as_ref().map(|j| j.status)));
     }
     Ok(Json(views))
 }
@@ -326,7 +318,7 @@ async fn get_anchor(
     let job = db::jobs::get(&state.pool, row.job_id).await?;
     Ok(Json(AnchorView::from_row(
         row,
-        job.as_ref().map(|j| j.status.as_str()),
+        job.as_ref().map(|j| j.status),
     )))
 }
 
@@ -343,10 +335,7 @@ async fn delete_anchor(
 ) -> Result<StatusCode> {
     let row = load(&state, &id).await?;
     let job = db::jobs::get(&state.pool, row.job_id).await?;
-    if job
-        .as_ref()
-        .is_some_and(|j| matches!(j.status.as_str(), "queued" | "running"))
-    {
+    if job.as_ref().is_some_and(|j| j.status.is_pending()) {
         return Err(ApiError::Conflict(format!(
             "anchor {id} is still fitting (job {}); wait for the job to end",
             row.job_id
@@ -364,12 +353,12 @@ async fn delete_anchor(
 }
 
 /// Checks a cohort request's `anchors` against the database: each must exist, belong to
-/// `model_id` and be ready. Returns the ids.
+/// `model_id` and be ready.
 pub(super) async fn check_cohort_anchors(
     state: &AppState,
     model_id: &str,
     ids: &[i64],
-) -> Result<Vec<i64>> {
+) -> Result<()> {
     for (i, &id) in ids.iter().enumerate() {
         let field = format!("anchors[{i}]");
         let row = db::anchors::get(&state.pool, id).await?;
@@ -384,12 +373,12 @@ pub(super) async fn check_cohort_anchors(
             );
             return Err(ApiError::invalid(field, "same-model", msg));
         }
-        if row.status != "ready" || row.latent.is_none() {
+        if row.status != AnchorStatus::Ready || row.latent.is_none() {
             let msg = format!("anchor {id} is {}, not ready", row.status);
             return Err(ApiError::invalid(field, "ready", msg));
         }
     }
-    Ok(ids.to_vec())
+    Ok(())
 }
 
 async fn load(state: &AppState, id: &str) -> Result<AnchorRow> {

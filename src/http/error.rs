@@ -127,6 +127,40 @@ impl From<anyhow::Error> for ApiError {
     }
 }
 
+/// A broken rule of a cohort request: 422 with its own field and rule.
+impl From<crate::cohort::RequestError> for ApiError {
+    fn from(e: crate::cohort::RequestError) -> Self {
+        Self::Validation {
+            field: e.field,
+            rule: e.rule,
+            message: e.message,
+        }
+    }
+}
+
+/// A target the model cannot reach: 422 naming the target, rule `feasible`.
+impl From<crate::cohort::Infeasible> for ApiError {
+    fn from(e: crate::cohort::Infeasible) -> Self {
+        crate::cohort::RequestError::from(e).into()
+    }
+}
+
+/// A full queue is 429 with `Retry-After`; a refused write as for database errors.
+impl From<crate::jobs::SubmitError> for ApiError {
+    fn from(e: crate::jobs::SubmitError) -> Self {
+        match e {
+            crate::jobs::SubmitError::QueueFull {
+                pending,
+                retry_after,
+            } => Self::QueueFull {
+                pending,
+                retry_after,
+            },
+            crate::jobs::SubmitError::Storage(e) => e.into(),
+        }
+    }
+}
+
 /// An RFC 9457 problem document, extended with the offending field and rule.
 #[derive(Debug, Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct Problem {

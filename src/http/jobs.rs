@@ -9,22 +9,23 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
-use super::extract::parse_id;
+use super::extractors::parse_id;
+use crate::db::states::{JobKind, JobStatus};
 use crate::db::{
     self,
     jobs::{CancelOutcome, JobRow},
 };
-use crate::jobs;
+use crate::jobs::{self, Job};
 
 /// A job as the API shows it.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct JobView {
     /// Job id.
     pub id: i64,
-    /// `cohort`, `training` or `fit`.
-    pub kind: String,
-    /// queued | running | succeeded | failed | cancelled.
-    pub status: String,
+    /// What it does.
+    pub kind: JobKind,
+    /// Where it stands.
+    pub status: JobStatus,
     /// Units of work done and in total (shapes for a cohort).
     pub progress: Progress,
     /// Times a worker claimed the job (more than 1 after restarts).
@@ -54,14 +55,11 @@ pub struct Progress {
 
 impl From<JobRow> for JobView {
     fn from(j: JobRow) -> Self {
-        let payload: serde_json::Value = serde_json::from_str(&j.payload).unwrap_or_default();
-        let subject = match (payload.get("cohort_id"), payload.get("model_id")) {
-            _ if payload.get("anchor_id").is_some() => {
-                payload.get("anchor_id").map(|a| format!("/v1/anchors/{a}"))
-            }
-            (Some(c), _) => Some(format!("/v1/cohorts/{c}")),
-            (None, Some(serde_json::Value::String(m))) => Some(format!("/v1/models/{m}")),
-            _ => None,
+        let subject = match Job::parse(j.kind, &j.payload) {
+            Ok(Job::Cohort(p)) => Some(format!("/v1/cohorts/{}", p.cohort_id)),
+            Ok(Job::Training(p)) => Some(format!("/v1/models/{}", p.model_id)),
+            Ok(Job::Fit(p)) => Some(format!("/v1/anchors/{}", p.anchor_id)),
+            Err(_) => None,
         };
         Self {
             id: j.job_id,
@@ -138,8 +136,9 @@ pub(super) async fn stop_job(state: &AppState, job_id: i64) -> Result<CancelOutc
             state.jobs.controls.interrupt(job_id);
         }
         CancelOutcome::CancelledWhileQueued => {
-            if let Some(job) = db::jobs::get(&state.pool, job_id).await? {
-                jobs::finish_cancelled_while_queued(&state.jobs, &job.kind, &job.payload).await?;
+            if let Some(row) = db::jobs::get(&state.pool, job_id).await? {
+                let job = Job::parse(row.kind, &row.payload).map_err(anyhow::Error::from)?;
+                jobs::finish_cancelled_while_queued(&state.jobs, &job).await?;
             }
         }
         CancelOutcome::AlreadyFinished => {}

@@ -5,7 +5,7 @@ pub mod access;
 pub mod anchors;
 pub mod cohorts;
 pub mod error;
-pub mod extract;
+pub mod extractors;
 pub mod health;
 pub mod jobs;
 pub mod limits;
@@ -27,16 +27,15 @@ use axum::middleware::{self, Next};
 use axum::response::Response;
 use axum::{Extension, Router};
 use sqlx::SqlitePool;
-use tokio::sync::Notify;
 use tower_http::trace::TraceLayer;
 use utoipa_axum::router::OpenApiRouter;
 
 use crate::config::Config;
 use crate::db::ReadOnlySwitch;
-use crate::jobs::JobContext;
+use crate::jobs::{JobContext, JobQueue};
 use access::AccessPolicy;
 use error::ApiError;
-use extract::JsonBodyLimit;
+use extractors::JsonBodyLimit;
 use limits::Limits;
 
 /// Everything handlers share; cheap to clone.
@@ -48,8 +47,8 @@ pub struct AppState {
     pub config: Arc<Config>,
     /// Engine, job controls and metrics, shared with the workers.
     pub jobs: JobContext,
-    /// Wakes an idle worker when a job is enqueued.
-    pub job_wake: Arc<Notify>,
+    /// The one way into the job queue.
+    pub queue: JobQueue,
     /// API keys and what they protect.
     pub access: Arc<AccessPolicy>,
     /// Fault injection: makes the database refuse writes (tests of storage faults).

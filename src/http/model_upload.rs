@@ -12,12 +12,14 @@ use serde::Serialize;
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
-use super::extract::ApiQuery;
+use super::extractors::ApiQuery;
 use super::upload_archive::{ArchiveLimits, looks_like_zip, unpack};
 use crate::db;
+use crate::db::states::ModelStatus;
+use crate::engine::TrainingSpec;
 use crate::formats::{MeshFormat, read_mesh_bytes};
 use crate::geometry::TriMesh;
-use crate::jobs::engine::TrainingSpec;
+use crate::jobs::Job;
 use crate::jobs::training::TrainingPayload;
 use crate::sdf::config::Preset;
 
@@ -144,43 +146,34 @@ pub(super) async fn create_model(
 
     let model_dir = state.config.models_dir.join(&model_id);
     let input_dir = model_dir.join("input");
-    let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
+    let mut submission = state.queue.begin().await?;
     if db::models::get(&state.pool, &model_id).await?.is_some() {
         return Err(ApiError::Conflict(format!(
             "model {model_id:?} already exists"
         )));
     }
-    let pending = db::jobs::count_pending(&mut *tx).await?;
-    if pending >= state.config.max_queue {
-        return Err(ApiError::QueueFull {
-            pending,
-            retry_after: state.config.retry_after_secs,
-        });
-    }
-    write_inputs(&input_dir, &files).await?;
-    let dir = model_dir.to_string_lossy();
-    db::models::insert_if_absent(
-        &mut tx,
-        &model_id,
-        &dir,
-        &serde_json::Value::Null,
-        "training",
-    )
-    .await?;
-    let payload = TrainingPayload {
+    let job = Job::Training(TrainingPayload {
         model_id: model_id.clone(),
         spec: TrainingSpec {
-            input_dir,
+            input_dir: input_dir.clone(),
             model_dir: model_dir.clone(),
             seed,
             epochs,
         },
-    };
-    let payload = serde_json::to_value(payload).map_err(anyhow::Error::from)?;
+    });
     let total_epochs = epochs.unwrap_or_else(|| Preset::Cpu.setup(seed).training.epochs);
-    let job_id = db::jobs::enqueue(&mut tx, "training", &payload, total_epochs as i64).await?;
-    tx.commit().await?;
-    state.job_wake.notify_one();
+    let job_id = submission.enqueue(&job, total_epochs as i64).await?;
+    write_inputs(&input_dir, &files).await?;
+    let dir = model_dir.to_string_lossy();
+    db::models::insert_if_absent(
+        submission.conn(),
+        &model_id,
+        &dir,
+        None,
+        ModelStatus::Training,
+    )
+    .await?;
+    submission.commit().await?;
     let body = TrainingAccepted {
         model_id: model_id.clone(),
         job_id,

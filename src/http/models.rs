@@ -8,8 +8,9 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
+use crate::db::states::ModelStatus;
 use crate::db::{self, models::ModelRow};
-use crate::jobs::engine::{ModelInfo, TrainingShapeInfo};
+use crate::engine::{ModelInfo, TrainingShapeInfo};
 
 /// A model as the API shows it.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
@@ -17,7 +18,7 @@ pub struct ModelView {
     /// Model id.
     pub id: String,
     /// training | ready | failed.
-    pub status: String,
+    pub status: ModelStatus,
     /// Registration time (UTC, RFC 3339).
     pub created_at: String,
     /// Latent code dimension (null while training).
@@ -68,7 +69,7 @@ impl From<TrainingShapeInfo> for TrainingShapeView {
 }
 
 fn manifest(row: &ModelRow) -> Option<ModelInfo> {
-    serde_json::from_str(&row.manifest).ok()
+    row.info().cloned()
 }
 
 impl ModelView {
@@ -153,7 +154,7 @@ async fn list_model_shapes(
               (status = 409, body = Problem, content_type = "application/problem+json", description = "In use or training")))]
 async fn delete_model(State(state): State<AppState>, Path(id): Path<String>) -> Result<StatusCode> {
     let model = load(&state, &id).await?;
-    if model.status == "training" {
+    if model.status == ModelStatus::Training {
         return Err(ApiError::Conflict(format!(
             "model {id:?} is still training"
         )));

@@ -10,12 +10,11 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
-use super::extract::parse_id;
+use super::extractors::parse_id;
 use crate::anatomy::shape::ShapeAnatomy;
 use crate::db;
 use crate::db::cohorts::CohortRow;
 use crate::engine::read_evaluation;
-use crate::jobs::engine::ModelInfo;
 use crate::report::{Report, Section, footer, render_html, sections};
 
 /// Plots of a model, by name.
@@ -99,20 +98,20 @@ async fn cohort_plot(
 async fn cohort_report(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response> {
     let cohort = load_cohort(&state, &id).await?;
     let sections = cohort_sections(&state, &cohort).await?;
-    let weights = cohort
-        .weights
-        .clone()
-        .unwrap_or_else(|| cohort.weighting.clone());
+    let weights = match &cohort.weights {
+        Some(w) => serde_json::to_string(&w.0).map_err(anyhow::Error::from)?,
+        None => cohort.weighting.as_str().to_owned(),
+    };
     let facts = vec![
         ("model".to_owned(), cohort.model_id.clone()),
-        ("status".into(), cohort.status.clone()),
+        ("status".into(), cohort.status.to_string()),
         (
             "shapes".into(),
             format!("{} of {}", cohort.shapes_done, cohort.count),
         ),
         ("arity".into(), cohort.arity.to_string()),
         ("weights".into(), weights),
-        ("selection".into(), cohort.selection.clone()),
+        ("selection".into(), cohort.selection.as_str().to_owned()),
         ("latent noise".into(), cohort.latent_noise.to_string()),
         (
             "minimum novelty".into(),
@@ -138,11 +137,8 @@ async fn model_sections(
     let row = db::models::get(&state.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("model", id))?;
-    let info: Option<ModelInfo> = serde_json::from_str(&row.manifest).ok();
-    let shapes = info
-        .as_ref()
-        .map(|i| i.training_shapes.clone())
-        .unwrap_or_default();
+    let info = row.info();
+    let shapes = info.map(|i| i.training_shapes.clone()).unwrap_or_default();
     let cds: Vec<f64> = shapes.iter().filter_map(|s| s.reconstruction_cd).collect();
     let dir = row.dir_path.clone();
     let floor = tokio::task::spawn_blocking(move || {
@@ -151,12 +147,11 @@ async fn model_sections(
     .await
     .map_err(anyhow::Error::from)?;
     let facts = vec![
-        ("status".to_owned(), row.status.clone()),
+        ("status".to_owned(), row.status.to_string()),
         ("training shapes".into(), shapes.len().to_string()),
         (
             "latent dimension".into(),
-            info.as_ref()
-                .map_or("?".into(), |i| i.latent_dim.to_string()),
+            info.map_or("?".into(), |i| i.latent_dim.to_string()),
         ),
         ("registered".into(), row.created_at.clone()),
     ];
@@ -174,8 +169,7 @@ async fn cohort_sections(state: &AppState, cohort: &CohortRow) -> Result<Vec<Sec
     let novelty: Vec<f64> = shapes.iter().filter_map(|s| s.novelty_cd).collect();
     let anatomy: Vec<ShapeAnatomy> = shapes
         .iter()
-        .filter_map(|s| s.anatomy.as_deref())
-        .filter_map(|json| serde_json::from_str(json).ok())
+        .filter_map(|s| s.anatomy.as_ref().map(|a| a.0.clone()))
         .collect();
     let measured = |f: fn(&ShapeAnatomy) -> Option<f64>| -> Vec<f64> {
         anatomy.iter().filter_map(f).collect()

@@ -12,10 +12,13 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::cohorts::{load as load_cohort, page};
 use super::error::{ApiError, Problem, Result};
-use super::extract::{ApiQuery, parse_id};
+use super::extractors::{ApiQuery, parse_id};
 use super::mesh_cache::MeshKey;
 use crate::anatomy::shape::ShapeAnatomy;
-use crate::db::{self, mesh_blob, shapes::ShapeRow};
+use crate::cohort::seeds::SEED_SCHEME;
+use crate::cohort::{AnchorShare, ShapeProvenance};
+use crate::db::{self, shapes::ShapeRow};
+use crate::formats::mesh_blob;
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::normalize::UnitBallTransform;
 use crate::telemetry::spawn_blocking_with_span;
@@ -47,6 +50,9 @@ pub struct ShapeView {
     pub conventions: &'static str,
     /// Download URL (add `?format=` and `&units=`).
     pub mesh_url: String,
+    /// SHA-256 of the stored unit-ball mesh in its canonical encoding (what `aortagen
+    /// generate` records as `mesh_sha256` for the same shape).
+    pub mesh_sha256: String,
     /// Chamfer distance (squared, unit-ball coordinates) to the nearest training shape, as
     /// reconstructed by the model at this shape's resolution: how far it is from disclosing
     /// one training patient.
@@ -64,32 +70,13 @@ pub struct ShapeView {
     pub anatomy_error: Option<String>,
 }
 
-/// The model, training shapes, weights, seed and resolution a shape came from.
+/// The model, training shapes, weights, seeds and resolution a shape came from (the record
+/// `aortagen generate` writes beside each mesh holds the same), with the anchors' ids.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct Provenance {
-    /// Model id.
-    pub model_id: String,
-    /// Training shapes mixed.
-    pub training_indices: Vec<usize>,
-    /// Their weights.
-    pub weights: Vec<f64>,
-    /// Per-shape seed.
-    pub seed: u64,
-    /// Marching-cubes resolution.
-    pub resolution: i64,
-    /// aortagen version.
-    pub software_version: String,
-    /// Latent noise in training standard deviations.
-    pub latent_noise: f64,
-    /// How the training latents were picked (`uniform` or `spread`).
-    pub selection: String,
-    /// Which draw was kept (0 = the first); `seed` is that draw's seed.
-    pub attempt: i64,
-    /// Candidates drawn to meet the cohort's targets (null without targets).
-    pub candidates: Option<i64>,
-    /// Whether the shape meets every target of its cohort (null without targets); false
-    /// when no candidate did and the closest was kept.
-    pub targets_met: Option<bool>,
+    /// How it was made.
+    #[serde(flatten)]
+    pub shape: ShapeProvenance,
     /// Fitted anchors mixed as well (see `POST /v1/models/{id}/fit`); their weights follow
     /// the training shapes' in `weights`.
     pub anchor_ids: Vec<i64>,
@@ -108,27 +95,37 @@ const CONVENTIONS: &str = "triangles counter-clockwise seen from outside (outwar
     signed distance negative inside";
 
 impl ShapeView {
-    fn from_row(s: ShapeRow) -> Result<Self> {
-        Ok(Self {
+    fn from_row(s: ShapeRow) -> Self {
+        let weights = s.weights.0;
+        let k = s.training_indices.0.len();
+        let names = s.anchor_names.map(|n| n.0).unwrap_or_default();
+        let anchors = names
+            .into_iter()
+            .zip(weights.iter().skip(k))
+            .map(|(name, &weight)| AnchorShare { name, weight })
+            .collect();
+        Self {
             id: s.shape_id,
             cohort_id: s.cohort_id,
             index: s.shape_index,
             provenance: Provenance {
-                model_id: s.model_id,
-                training_indices: parse_json(&s.training_indices)?,
-                weights: parse_json(&s.weights)?,
-                seed: s.seed as u64,
-                resolution: s.resolution,
-                software_version: s.software_version,
-                latent_noise: s.latent_noise,
-                selection: s.selection,
-                attempt: s.attempt,
-                candidates: s.candidates,
-                targets_met: s.targets_met,
-                anchor_ids: match &s.anchor_ids {
-                    Some(json) => parse_json(json)?,
-                    None => Vec::new(),
+                shape: ShapeProvenance {
+                    model_id: s.model_id,
+                    training_indices: s.training_indices.0,
+                    weights,
+                    anchors,
+                    seed: s.seed as u64,
+                    cohort_seed: s.cohort_seed as u64,
+                    seed_scheme: SEED_SCHEME,
+                    resolution: s.resolution,
+                    software_version: s.software_version,
+                    latent_noise: s.latent_noise,
+                    selection: s.selection,
+                    attempt: s.attempt,
+                    candidates: s.candidates,
+                    targets_met: s.targets_met,
                 },
+                anchor_ids: s.anchor_ids.map(|a| a.0).unwrap_or_default(),
             },
             vertex_count: s.vertex_count,
             triangle_count: s.triangle_count,
@@ -141,13 +138,14 @@ impl ShapeView {
             },
             conventions: CONVENTIONS,
             mesh_url: format!("/v1/shapes/{}/mesh", s.shape_id),
+            mesh_sha256: s.mesh_sha256,
             novelty_cd: s.novelty_cd,
             nearest_training_index: s.nearest_training_index,
             redraws: s.redraws,
             novelty_met: s.novelty_met,
-            anatomy: s.anatomy.as_deref().map(parse_json).transpose()?,
+            anatomy: s.anatomy.map(|a| a.0),
             anatomy_error: s.anatomy_error,
-        })
+        }
     }
 }
 
@@ -192,10 +190,7 @@ async fn list_cohort_shapes(
     let (limit, offset) = page(q.limit, q.offset)?;
     let rows = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, limit, offset).await?;
     let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
-    let items = rows
-        .into_iter()
-        .map(ShapeView::from_row)
-        .collect::<Result<_>>()?;
+    let items = rows.into_iter().map(ShapeView::from_row).collect();
     Ok(Json(ShapePage { items, next_offset }))
 }
 
@@ -211,7 +206,7 @@ async fn get_shape(
     let row = db::shapes::get(&state.pool, parse_id("shape", &id)?)
         .await?
         .ok_or_else(|| ApiError::not_found("shape", &id))?;
-    Ok(Json(ShapeView::from_row(row)?))
+    Ok(Json(ShapeView::from_row(row)))
 }
 
 /// Download options.
@@ -298,10 +293,6 @@ async fn get_shape_mesh(
     Ok((cache, headers, bytes).into_response())
 }
 
-fn parse_json<T: serde::de::DeserializeOwned>(json: &str) -> Result<T> {
-    Ok(serde_json::from_str(json).map_err(anyhow::Error::from)?)
-}
-
 const CACHE_FOREVER: &str = "public, max-age=31536000, immutable";
 
 /// Reads the stored unit-ball mesh and writes it in `format` and `units`, off the executor.
@@ -315,7 +306,7 @@ async fn encode_mesh(
     let stored = db::shapes::get_mesh(&state.pool, shape_id)
         .await?
         .ok_or_else(|| ApiError::not_found("shape", shape_id.to_string()))?;
-    let view = ShapeView::from_row(shape)?;
+    let view = ShapeView::from_row(shape);
     let meta = MeshMetadata {
         units: units.to_owned(),
         generator: format!("aortagen {}", crate::VERSION),

@@ -1,64 +1,39 @@
-//! The cohort job: generates the shapes not yet stored, one transaction per shape, then the
-//! pairwise Chamfer metrics. Re-running it after an interruption continues where it stopped.
+//! The cohort job: the cohort pipeline ([`crate::cohort`]) generates the shapes not yet
+//! stored on an engine thread, this task commits each in its own transaction as it arrives,
+//! then the pairwise Chamfer metrics. Re-running it after an interruption continues where
+//! it stopped.
 
 use std::collections::HashSet;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
+use tokio::sync::{mpsc, oneshot};
 
-use super::conditioned::{ShapeSearch, Targeting, search_shape, training_anatomy};
-use super::engine::{AnchorLatent, CohortEngine, GeneratedShape, ModelInfo, ShapeSpec};
-use super::plan::{CohortPlan, Weighting, force_anchors};
 use super::priority::spawn_background;
-use super::{JobContext, RunOutcome, join_error, stats, stop_outcome};
-use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
-use crate::anatomy::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, Targets, check_feasible};
-use crate::db::{self, cohorts::CohortRow, jobs::ClaimedJob, mesh_blob};
-use crate::sdf::generate::MAX_REDRAWS;
-use crate::sdf::generate::Selection;
-use crate::sdf::novelty::{Novelty, NoveltyReference};
+use super::{JobContext, JobError, join_error, setup, stats};
+use crate::cohort::{
+    CohortError, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape, EngineHandle,
+};
+use crate::db::{self, cohorts::CohortRow, models::ModelRow};
+use crate::engine::{AnchorLatent, Engine};
+use crate::formats::mesh_blob;
 
 /// The payload of a `cohort` job.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CohortPayload {
     /// The cohort to generate.
     pub cohort_id: i64,
 }
 
-/// The plan a stored cohort describes; `latents` are the model's training latents (needed
-/// for spread selection only).
-pub fn plan_for(
-    cohort: &CohortRow,
-    info: &ModelInfo,
-    latents: Option<Arc<Vec<Vec<f32>>>>,
-) -> anyhow::Result<CohortPlan> {
-    let weights = match &cohort.weights {
-        Some(json) => Some(serde_json::from_str(json).context("stored weights are not JSON")?),
-        None => None,
-    };
-    Ok(CohortPlan {
-        training_shapes: info.training_shape_count(),
-        arity: cohort.arity as usize,
-        weights,
-        weighting: Weighting::parse(&cohort.weighting).context("stored weighting is unknown")?,
-        seed: cohort.seed as u64,
-        resolution: cohort.resolution as usize,
-        selection: Selection::parse(&cohort.selection).context("stored selection is unknown")?,
-        latent_noise: cohort.latent_noise,
-        latents,
-    })
-}
-
 pub(super) async fn run(
     ctx: &JobContext,
-    job: &ClaimedJob,
+    job_id: i64,
+    payload: &CohortPayload,
     flag: &Arc<AtomicBool>,
-) -> anyhow::Result<RunOutcome> {
-    let payload: CohortPayload = serde_json::from_str(&job.payload).context("bad job payload")?;
+) -> Result<(), JobError> {
     let cohort = db::cohorts::get(&ctx.pool, payload.cohort_id)
         .await?
         .with_context(|| format!("cohort {} no longer exists", payload.cohort_id))?;
@@ -66,224 +41,254 @@ pub(super) async fn run(
     let model = db::models::get(&ctx.pool, &cohort.model_id)
         .await?
         .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
-    let info: ModelInfo = serde_json::from_str(&model.manifest).context("bad model manifest")?;
-    let model_dir = PathBuf::from(&model.dir_path);
-    let latents = if cohort.selection == Selection::Spread.as_str() {
-        let engine = ctx.engine.clone();
-        let dir = model_dir.clone();
-        let latents = spawn_background(move || engine.training_latents(&dir))
-            .await
-            .map_err(join_error)?
-            .context("cannot read the training latents")?;
-        anyhow::ensure!(
-            latents.len() == info.training_shape_count(),
-            "the engine returned {} latents for {} training shapes",
-            latents.len(),
-            info.training_shape_count()
-        );
-        Some(Arc::new(latents))
-    } else {
-        None
-    };
-    let plan = plan_for(&cohort, &info, latents)?;
-    let anchor_ids: Vec<i64> = match &cohort.anchors {
-        Some(json) => serde_json::from_str(json).context("stored anchors are not JSON")?,
-        None => Vec::new(),
-    };
-    let anchors = match anchor_latents(&ctx.pool, &anchor_ids).await {
-        Ok(a) => a,
-        Err(e) if db::storage_fault_in(&e).is_some() => return Err(e),
-        Err(e) => return Ok(RunOutcome::Failed(format!("anchors: {e:#}"))),
-    };
-
+    let request = cohort.request().context("the stored request")?;
     let stored: HashSet<i64> = db::shapes::existing_indices(&ctx.pool, cohort.cohort_id)
         .await?
         .into_iter()
         .collect();
-    let mut done = stored.len() as i64;
-    if done > 0 {
-        tracing::info!(done, "resuming cohort");
-    }
-    let missing: Vec<i64> = (0..cohort.count).filter(|i| !stored.contains(i)).collect();
-    let reference = match missing.is_empty() {
-        true => None,
-        false => match novelty_reference(ctx, &model_dir, plan.resolution, flag).await {
-            Ok(r) => Some(r),
-            Err(e) => {
-                if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-                    return Ok(stop);
-                }
-                return Ok(RunOutcome::Failed(format!("training surfaces: {e:#}")));
-            }
-        },
-    };
-    let targeting = match (&cohort.targets, missing.is_empty()) {
-        (Some(json), false) => match targeting(ctx, &cohort, &model, &info, json).await {
-            Ok(t) => Some(Arc::new(t)),
-            Err(e) => {
-                if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-                    return Ok(stop);
-                }
-                return Ok(RunOutcome::Failed(format!("targets: {e:#}")));
-            }
-        },
-        _ => None,
-    };
-    let attempts = match cohort.min_novelty {
-        Some(_) => MAX_REDRAWS + 1,
-        None => 1,
-    };
-    for index in missing {
-        let reference = reference.clone().context("no novelty reference")?;
-        if let Some(targeting) = &targeting {
-            if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-                return Ok(stop);
-            }
-            let search = ShapeSearch {
-                engine: ctx.engine.clone(),
-                model_dir: model_dir.clone(),
-                plan: plan.clone(),
-                targeting: targeting.clone(),
-                reference,
-                min_novelty: cohort.min_novelty,
-                cancel: flag.clone(),
-                anchors: anchors.clone(),
-            };
-            let searched = match search_shape(search, index as u64).await {
-                Ok(s) => s,
-                Err(e) => {
-                    if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-                        return Ok(stop);
-                    }
-                    return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}")));
-                }
-            };
-            let kept = searched.kept;
-            let outcome = Outcome {
-                redraws: 0,
-                novelty_met: cohort
-                    .min_novelty
-                    .is_none_or(|m| kept.candidate.novelty.chamfer >= m),
-                candidates: Some(i64::from(searched.candidates)),
-                targets_met: Some(searched.met),
-            };
-            let finished = match finish(kept.candidate, Some(kept.anatomy)).await {
-                Ok(f) => f,
-                Err(e) => return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}"))),
-            };
-            done += 1;
-            commit_shape(ctx, job.job_id, &cohort, index, &finished, &outcome, done).await?;
-            ctx.metrics.inc_shapes_generated();
-            tracing::debug!(
-                index,
-                done,
-                candidates = searched.candidates,
-                met = searched.met,
-                "targeted shape committed"
-            );
-            continue;
+    let missing: Vec<u64> = (0..cohort.count)
+        .filter(|i| !stored.contains(i))
+        .map(|i| i as u64)
+        .collect();
+    if !missing.is_empty() {
+        if !stored.is_empty() {
+            tracing::info!(done = stored.len(), "resuming cohort");
         }
-        let mut best: Option<Candidate> = None;
-        let mut redraws = 0;
-        for attempt in 0..attempts {
-            if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-                return Ok(stop);
-            }
-            let spec = force_anchors(plan.shape_spec_attempt(index as u64, attempt), &anchors);
-            let generated = generate(
-                ctx,
-                model_dir.clone(),
-                spec,
-                reference.clone(),
-                flag.clone(),
-            )
-            .await;
-            let candidate = match generated {
-                Ok(c) => c,
-                Err(e) => {
-                    if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-                        return Ok(stop);
-                    }
-                    return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}")));
-                }
-            };
-            redraws = attempt;
-            let cd = candidate.novelty.chamfer;
-            let met = cohort.min_novelty.is_none_or(|m| cd >= m);
-            if best
-                .as_ref()
-                .is_none_or(|b| candidate.novelty.chamfer > b.novelty.chamfer)
-            {
-                best = Some(Candidate {
-                    attempt,
-                    ..candidate
-                });
-            }
-            if met {
-                break;
-            }
-            tracing::debug!(index, attempt, cd, "draw too close to a training shape");
-        }
-        let best = best.context("no draw was made")?;
-        let met = cohort.min_novelty.is_none_or(|m| best.novelty.chamfer >= m);
-        let finished = match finish(best, None).await {
-            Ok(f) => f,
-            Err(e) => return Ok(RunOutcome::Failed(format!("shape {index}: {e:#}"))),
+        let generation = Generation {
+            ctx,
+            job_id,
+            cohort: &cohort,
+            model: &model,
+            request,
+            flag,
         };
-        done += 1;
-        let outcome = Outcome {
-            redraws: i64::from(redraws),
-            novelty_met: met,
-            candidates: None,
-            targets_met: None,
-        };
-        commit_shape(ctx, job.job_id, &cohort, index, &finished, &outcome, done).await?;
-        ctx.metrics.inc_shapes_generated();
-        tracing::debug!(index, done, redraws, "shape committed");
+        generation.run(missing, stored.len() as i64).await?;
     }
     let has_metrics = db::cohort_metrics::get(&ctx.pool, cohort.cohort_id)
         .await?
         .is_some();
-    if !has_metrics && let Err(e) = compute_metrics(ctx, &cohort).await {
-        if db::storage_fault_in(&e).is_some() {
-            return Err(e.context("cannot store the pairwise metrics"));
-        }
-        return Ok(RunOutcome::Failed(format!("pairwise metrics: {e:#}")));
+    if !has_metrics {
+        compute_metrics(ctx, &cohort)
+            .await
+            .context("pairwise metrics")?;
     }
-    Ok(RunOutcome::Succeeded)
+    Ok(())
 }
 
-/// The search settings of a targeted cohort, with the model's training measurements
-/// (stored with the model when the cohort was accepted).
-async fn targeting(
-    ctx: &JobContext,
-    cohort: &CohortRow,
-    model: &db::models::ModelRow,
-    info: &ModelInfo,
-    json: &str,
-) -> anyhow::Result<Targeting> {
-    let ranges: std::collections::BTreeMap<String, TargetRange> =
-        serde_json::from_str(json).context("stored targets are not JSON")?;
-    let targets = Targets::parse(&ranges)?;
-    let training = training_anatomy(
-        &ctx.pool,
-        ctx.engine.clone(),
-        &model.model_id,
-        std::path::Path::new(&model.dir_path),
-        info.training_shape_count(),
-    )
-    .await?;
-    // A cohort accepted before the model was measured is checked here instead of at the edge.
-    check_feasible(&targets, &training.shapes)?;
-    let max_candidates = cohort.max_candidates.map_or(DEFAULT_MAX_CANDIDATES, |m| {
-        m.clamp(1, i64::from(u32::MAX)) as u32
-    });
-    Ok(Targeting::new(
-        targets,
-        max_candidates,
-        &training,
-        cohort.arity as usize,
-    ))
+/// The generation of a cohort's missing shapes.
+struct Generation<'a> {
+    ctx: &'a JobContext,
+    job_id: i64,
+    cohort: &'a CohortRow,
+    model: &'a ModelRow,
+    request: CohortRequest<i64>,
+    flag: &'a Arc<AtomicBool>,
+}
+
+/// Why the engine thread stopped generating.
+enum GenerationStop {
+    /// The pipeline stopped.
+    Cohort(CohortError),
+    /// This task stopped taking shapes (its commit failed).
+    Abandoned,
+}
+
+impl From<CohortError> for GenerationStop {
+    fn from(e: CohortError) -> Self {
+        Self::Cohort(e)
+    }
+}
+
+/// A finished shape with its canonical encoding.
+struct Encoded {
+    shape: CohortShape,
+    blob: Vec<u8>,
+    sha: String,
+}
+
+impl Generation<'_> {
+    /// Generates `missing` on an engine thread and commits each shape as it arrives; the
+    /// next shape is generated only once the last one is stored. `done` shapes are stored
+    /// already.
+    async fn run(self, missing: Vec<u64>, mut done: i64) -> Result<(), JobError> {
+        let generator = self.generator().await?;
+        let (sender, mut shapes) = mpsc::channel::<(Encoded, oneshot::Sender<()>)>(1);
+        let task = spawn_background(move || {
+            generator.run(missing, |shape| {
+                let blob = mesh_blob::encode(&shape.shape.mesh_unit);
+                let sha = mesh_blob::sha256_hex(&blob);
+                let (stored, committed) = oneshot::channel();
+                sender
+                    .blocking_send((Encoded { shape, blob, sha }, stored))
+                    .map_err(|_| GenerationStop::Abandoned)?;
+                committed
+                    .blocking_recv()
+                    .map_err(|_| GenerationStop::Abandoned)
+            })
+        });
+        let mut commit_error = None;
+        while let Some((encoded, stored)) = shapes.recv().await {
+            done += 1;
+            let committed = self.commit_shape(&encoded, done).await;
+            let cancel = match committed {
+                Ok(()) => db::jobs::is_cancel_requested(&self.ctx.pool, self.job_id)
+                    .await
+                    .map_err(anyhow::Error::from),
+                Err(e) => Err(e),
+            };
+            match cancel {
+                Ok(cancel) => {
+                    self.ctx.metrics.inc_shapes_generated();
+                    tracing::debug!(index = encoded.shape.index, done, "shape committed");
+                    if cancel {
+                        self.flag.store(true, Ordering::SeqCst);
+                    }
+                    let _ = stored.send(());
+                }
+                Err(e) => {
+                    self.flag.store(true, Ordering::SeqCst);
+                    commit_error = Some(e);
+                    break;
+                }
+            }
+        }
+        drop(shapes);
+        let generated = task.await.map_err(join_error)?;
+        if let Some(e) = commit_error {
+            return Err(JobError::Failed(e.context("cannot store a shape")));
+        }
+        match generated {
+            Ok(()) => Ok(()),
+            Err(GenerationStop::Cohort(e)) => Err(e.into()),
+            Err(GenerationStop::Abandoned) => Err(JobError::Stopped),
+        }
+    }
+
+    /// The pipeline of this cohort: anchors, training measurements and latents read, the
+    /// novelty reference built (cached by the engine per model and resolution).
+    async fn generator(&self) -> Result<CohortGenerator, JobError> {
+        let ctx = self.ctx;
+        let info = self
+            .model
+            .info()
+            .with_context(|| format!("model {:?} has no manifest", self.model.model_id))?;
+        let count = info.training_shape_count();
+        let model_dir = PathBuf::from(&self.model.dir_path);
+        let anchors = anchor_latents(&ctx.pool, &self.request.anchors)
+            .await
+            .context("anchors")?;
+        let training = match &self.request.targets {
+            None => None,
+            Some(_) => Some(
+                setup::training_anatomy(
+                    &ctx.pool,
+                    ctx.engine.clone(),
+                    &self.model.model_id,
+                    &model_dir,
+                    count,
+                )
+                .await
+                .context("targets")?,
+            ),
+        };
+        let engine = ctx.engine.clone();
+        let (request, flag) = (self.request.clone(), self.flag.clone());
+        let handle = EngineHandle {
+            engine: engine.clone(),
+            model_dir: model_dir.clone(),
+            model_id: self.model.model_id.clone(),
+            cancel: flag.clone(),
+        };
+        let built = spawn_background(move || -> Result<CohortGenerator, JobError> {
+            let latents = match request.selection.needs_latents() {
+                false => None,
+                true => Some(Arc::new(training_latents(&*engine, &model_dir, count)?)),
+            };
+            let plan = CohortPlan::new(&request, count, latents, anchors);
+            let reference = engine
+                .novelty_reference(&model_dir, request.resolution, &flag)
+                .map_err(|e| match flag.load(Ordering::SeqCst) {
+                    true => CohortError::Cancelled,
+                    false => CohortError::Reference(e),
+                })?;
+            let setup = CohortSetup {
+                reference,
+                training,
+            };
+            Ok(CohortGenerator::new(handle, plan, &request, setup)?)
+        });
+        built.await.map_err(join_error)?
+    }
+
+    /// Stores one shape and the job's progress in a single transaction.
+    async fn commit_shape(&self, encoded: &Encoded, done: i64) -> anyhow::Result<()> {
+        let CohortShape {
+            index,
+            spec,
+            shape,
+            novelty,
+            redraws,
+            novelty_met,
+            anatomy,
+            provenance,
+            ..
+        } = &encoded.shape;
+        let row = db::shapes::NewShape {
+            cohort_id: self.cohort.cohort_id,
+            shape_index: *index as i64,
+            training_indices: &spec.training_indices,
+            weights: &spec.weights,
+            seed: spec.seed as i64,
+            resolution: spec.resolution as i64,
+            software_version: &provenance.software_version,
+            vertex_count: shape.mesh_unit.vertex_count() as i64,
+            triangle_count: shape.mesh_unit.triangle_count() as i64,
+            area_mm2: shape.area_mm2,
+            volume_mm3: shape.volume_mm3,
+            centre: shape.transform.centre,
+            radius: shape.transform.radius,
+            mesh: &encoded.blob,
+            mesh_sha256: &encoded.sha,
+            latent_noise: spec.latent_noise,
+            selection: provenance.selection,
+            attempt: provenance.attempt,
+            redraws: i64::from(*redraws),
+            novelty_cd: Some(novelty.chamfer),
+            nearest_training_index: Some(novelty.nearest as i64),
+            novelty_met: Some(*novelty_met),
+            anatomy: anatomy.as_ref().ok(),
+            anatomy_error: anatomy.as_ref().err().map(String::as_str),
+            candidates: provenance.candidates,
+            targets_met: provenance.targets_met,
+        };
+        let mut tx = self.ctx.pool.begin_with(db::BEGIN_WRITE).await?;
+        let shape_id = db::shapes::insert(&mut tx, &row)
+            .await
+            .with_context(|| format!("cannot store shape {index}"))?;
+        if !self.request.anchors.is_empty() {
+            db::anchors::set_shape_anchors(&mut tx, shape_id, &self.request.anchors).await?;
+        }
+        db::jobs::set_progress(&mut tx, self.job_id, done).await?;
+        tx.commit().await.context("cannot commit shape")?;
+        Ok(())
+    }
+}
+
+/// The model's training latents, which spread selection picks from.
+fn training_latents(
+    engine: &dyn Engine,
+    model_dir: &std::path::Path,
+    count: usize,
+) -> anyhow::Result<Vec<Vec<f32>>> {
+    let latents = engine
+        .training_latents(model_dir)
+        .context("cannot read the training latents")?;
+    anyhow::ensure!(
+        latents.len() == count,
+        "the engine returned {} latents for {count} training shapes",
+        latents.len()
+    );
+    Ok(latents)
 }
 
 /// The latents of a cohort's anchors, in the listed order; an error names a missing one.
@@ -297,182 +302,12 @@ async fn anchor_latents(pool: &sqlx::SqlitePool, ids: &[i64]) -> anyhow::Result<
             anyhow::bail!("anchor {id} has no fitted latent");
         };
         out.push(AnchorLatent {
-            anchor_id: id,
+            name: row.name,
             latent,
             transform,
         });
     }
     Ok(out)
-}
-
-/// One draw of a shape with its distance to the training set.
-pub(super) struct Candidate {
-    pub(super) spec: ShapeSpec,
-    pub(super) shape: GeneratedShape,
-    pub(super) novelty: Novelty,
-    pub(super) attempt: u32,
-}
-
-/// The kept draw, encoded for storage and measured.
-struct Finished {
-    candidate: Candidate,
-    blob: Vec<u8>,
-    sha: String,
-    /// Measurements as JSON, or why they failed.
-    anatomy: Result<String, String>,
-}
-
-/// How the kept draw was reached.
-struct Outcome {
-    redraws: i64,
-    novelty_met: bool,
-    /// Candidates drawn (targeted cohorts).
-    candidates: Option<i64>,
-    /// Whether the kept shape meets every target (targeted cohorts).
-    targets_met: Option<bool>,
-}
-
-/// The model's training surfaces at the cohort's resolution, off the executor.
-async fn novelty_reference(
-    ctx: &JobContext,
-    model_dir: &std::path::Path,
-    resolution: usize,
-    flag: &Arc<AtomicBool>,
-) -> anyhow::Result<Arc<NoveltyReference>> {
-    let engine = ctx.engine.clone();
-    let dir = model_dir.to_path_buf();
-    let flag = flag.clone();
-    spawn_background(move || engine.novelty_reference(&dir, resolution, &flag))
-        .await
-        .map_err(join_error)?
-}
-
-/// Generates one draw and measures its novelty, off the executor.
-async fn generate(
-    ctx: &JobContext,
-    model_dir: PathBuf,
-    spec: ShapeSpec,
-    reference: Arc<NoveltyReference>,
-    flag: Arc<AtomicBool>,
-) -> anyhow::Result<Candidate> {
-    let engine = ctx.engine.clone();
-    spawn_background(move || draw(&*engine, &model_dir, spec, &reference, &flag))
-        .await
-        .map_err(join_error)?
-}
-
-/// Generates one draw and measures its novelty (blocking).
-pub(super) fn draw(
-    engine: &dyn CohortEngine,
-    model_dir: &std::path::Path,
-    spec: ShapeSpec,
-    reference: &NoveltyReference,
-    flag: &AtomicBool,
-) -> anyhow::Result<Candidate> {
-    let shape = engine.generate_shape(model_dir, &spec, flag)?;
-    shape
-        .mesh_unit
-        .validate()
-        .context("engine returned an invalid mesh")?;
-    let novelty = reference
-        .novelty(&shape.mesh_unit, spec.seed)
-        .context("novelty")?;
-    anyhow::ensure!(
-        novelty.chamfer.is_finite() && novelty.nearest < reference.len(),
-        "novelty is not a finite distance to a training shape"
-    );
-    Ok(Candidate {
-        spec,
-        shape,
-        novelty,
-        attempt: 0,
-    })
-}
-
-/// Encodes the kept draw and measures its anatomy in mm (unless `measured` already holds
-/// it), off the executor.
-async fn finish(
-    candidate: Candidate,
-    measured: Option<Result<ShapeAnatomy, String>>,
-) -> anyhow::Result<Finished> {
-    spawn_background(move || {
-        let blob = mesh_blob::encode(&candidate.shape.mesh_unit);
-        let sha = hex(&Sha256::digest(&blob));
-        let shape = &candidate.shape;
-        let measured = measured.unwrap_or_else(|| {
-            let mesh_mm = shape.transform.mesh_to_mesh_units(&shape.mesh_unit);
-            measure_shape(&mesh_mm).map_err(|e| e.to_string())
-        });
-        let anatomy = match measured {
-            Ok(a) => Ok(serde_json::to_string(&a)?),
-            Err(e) => Err(e),
-        };
-        Ok(Finished {
-            candidate,
-            blob,
-            sha,
-            anatomy,
-        })
-    })
-    .await
-    .map_err(join_error)?
-}
-
-/// Stores one shape and the job's progress in a single transaction.
-async fn commit_shape(
-    ctx: &JobContext,
-    job_id: i64,
-    cohort: &CohortRow,
-    index: i64,
-    finished: &Finished,
-    outcome: &Outcome,
-    done: i64,
-) -> anyhow::Result<()> {
-    let Candidate {
-        spec,
-        shape,
-        novelty,
-        attempt,
-    } = &finished.candidate;
-    let row = db::shapes::NewShape {
-        cohort_id: cohort.cohort_id,
-        shape_index: index,
-        training_indices: &spec.training_indices,
-        weights: &spec.weights,
-        seed: spec.seed as i64,
-        resolution: spec.resolution as i64,
-        software_version: crate::VERSION,
-        vertex_count: shape.mesh_unit.vertex_count() as i64,
-        triangle_count: shape.mesh_unit.triangle_count() as i64,
-        area_mm2: shape.area_mm2,
-        volume_mm3: shape.volume_mm3,
-        centre: shape.transform.centre,
-        radius: shape.transform.radius,
-        mesh: &finished.blob,
-        mesh_sha256: &finished.sha,
-        latent_noise: spec.latent_noise,
-        selection: &cohort.selection,
-        attempt: i64::from(*attempt),
-        redraws: outcome.redraws,
-        novelty_cd: Some(novelty.chamfer),
-        nearest_training_index: Some(novelty.nearest as i64),
-        novelty_met: Some(outcome.novelty_met),
-        anatomy: finished.anatomy.as_deref().ok(),
-        anatomy_error: finished.anatomy.as_ref().err().map(String::as_str),
-        candidates: outcome.candidates,
-        targets_met: outcome.targets_met,
-    };
-    let mut tx = ctx.pool.begin_with(db::BEGIN_WRITE).await?;
-    let shape_id = db::shapes::insert(&mut tx, &row)
-        .await
-        .with_context(|| format!("cannot store shape {index}"))?;
-    if !spec.anchors.is_empty() {
-        let ids: Vec<i64> = spec.anchors.iter().map(|a| a.anchor_id).collect();
-        db::anchors::set_shape_anchors(&mut tx, shape_id, &ids).await?;
-    }
-    db::jobs::set_progress(&mut tx, job_id, done).await?;
-    tx.commit().await.context("cannot commit shape")?;
-    Ok(())
 }
 
 /// Pairwise Chamfer distances over the stored unit-ball meshes, summarised and stored.
@@ -502,9 +337,4 @@ async fn compute_metrics(ctx: &JobContext, cohort: &CohortRow) -> anyhow::Result
     let summary = serde_json::to_value(stats::summarize(&matrix))?;
     db::cohort_metrics::upsert(&ctx.pool, cohort.cohort_id, &matrix, &summary).await?;
     Ok(())
-}
-
-/// Lower-case hexadecimal.
-pub fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }

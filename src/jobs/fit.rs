@@ -10,12 +10,12 @@ use std::time::Duration;
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
-use super::engine::FitSpec;
-use super::{JobContext, RunOutcome, run_with_progress, stop_outcome};
-use crate::db::{self, jobs::ClaimedJob};
+use super::{JobContext, JobError, RunOutcome, run_with_progress, stopped, stopped_or_failed};
+use crate::db;
+use crate::engine::FitSpec;
 
 /// The payload of a `fit` job.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FitPayload {
     /// The anchor row being fitted.
     pub anchor_id: i64,
@@ -30,71 +30,50 @@ const PROGRESS_INTERVAL: Duration = Duration::from_millis(500);
 
 pub(super) async fn run(
     ctx: &JobContext,
-    job: &ClaimedJob,
+    job_id: i64,
+    payload: &FitPayload,
     flag: &Arc<AtomicBool>,
-) -> anyhow::Result<RunOutcome> {
-    let payload: FitPayload = serde_json::from_str(&job.payload).context("bad job payload")?;
+) -> Result<(), JobError> {
     tracing::Span::current().record("model_id", payload.model_id.as_str());
-    let anchor_id = payload.anchor_id;
-    if let Some(stop) = stop_outcome(ctx, job.job_id, flag).await? {
-        return finish(ctx, anchor_id, stop).await;
-    }
-    let Some(model) = db::models::get(&ctx.pool, &payload.model_id).await? else {
-        let message = format!("model {:?} no longer exists", payload.model_id);
-        return finish(ctx, anchor_id, RunOutcome::Failed(message)).await;
-    };
+    stopped(flag)?;
+    let model = db::models::get(&ctx.pool, &payload.model_id)
+        .await?
+        .with_context(|| format!("model {:?} no longer exists", payload.model_id))?;
     let engine = ctx.engine.clone();
     let model_dir = PathBuf::from(&model.dir_path);
     let (spec, task_flag) = (payload.spec.clone(), flag.clone());
-    let fitted = run_with_progress(ctx, job.job_id, PROGRESS_INTERVAL, move |steps| {
+    let fitted = run_with_progress(ctx, job_id, PROGRESS_INTERVAL, move |steps| {
         engine.fit_anchor(&model_dir, &spec, &task_flag, steps)
     })
     .await?;
-    match fitted {
-        Ok(fitted) => {
-            anyhow::ensure!(
-                fitted.chamfer.is_finite() && fitted.latent.iter().all(|v| v.is_finite()),
-                "the engine returned a non-finite latent or Chamfer distance"
-            );
-            db::anchors::set_fitted(
-                &ctx.pool,
-                anchor_id,
-                &fitted.latent,
-                fitted.chamfer,
-                &fitted.transform,
-            )
-            .await?;
-            Ok(RunOutcome::Succeeded)
-        }
-        Err(e) if db::storage_fault_in(&e).is_some() => Err(e.context("fitting")),
-        Err(e) => {
-            let outcome = match stop_outcome(ctx, job.job_id, flag).await? {
-                Some(stop) => stop,
-                None => RunOutcome::Failed(format!("fitting: {e:#}")),
-            };
-            finish(ctx, anchor_id, outcome).await
-        }
+    let fitted = fitted.map_err(|e| stopped_or_failed(flag, e.context("fitting")))?;
+    if !(fitted.chamfer.is_finite() && fitted.latent.iter().all(|v| v.is_finite())) {
+        let e = anyhow::anyhow!("the engine returned a non-finite latent or Chamfer distance");
+        return Err(e.into());
     }
-}
-
-/// Marks the anchor of a job cancelled before it ran.
-pub(super) async fn finish_cancelled(ctx: &JobContext, payload: &str) -> anyhow::Result<()> {
-    let payload: FitPayload = serde_json::from_str(payload).context("bad job payload")?;
-    finish(ctx, payload.anchor_id, RunOutcome::Cancelled).await?;
+    db::anchors::set_fitted(
+        &ctx.pool,
+        payload.anchor_id,
+        &fitted.latent,
+        fitted.chamfer,
+        &fitted.transform,
+    )
+    .await?;
     Ok(())
 }
 
-/// Marks the anchor according to a run that did not succeed (a released job stays
+/// Marks the anchor failed when its fit ended without success (a released job stays
 /// `fitting` and runs again).
-async fn finish(
+pub(super) async fn finish(
     ctx: &JobContext,
-    anchor_id: i64,
-    outcome: RunOutcome,
-) -> anyhow::Result<RunOutcome> {
-    match &outcome {
-        RunOutcome::Released => {}
-        RunOutcome::Failed(e) => db::anchors::set_failed(&ctx.pool, anchor_id, e).await?,
-        _ => db::anchors::set_failed(&ctx.pool, anchor_id, "cancelled").await?,
-    }
-    Ok(outcome)
+    payload: &FitPayload,
+    outcome: &RunOutcome,
+) -> anyhow::Result<()> {
+    let reason = match outcome {
+        RunOutcome::Failed(e) => e.as_str(),
+        RunOutcome::Cancelled => "cancelled",
+        _ => return Ok(()),
+    };
+    db::anchors::set_failed(&ctx.pool, payload.anchor_id, reason).await?;
+    Ok(())
 }

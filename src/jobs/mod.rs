@@ -1,14 +1,13 @@
-//! Background work: a durable queue in the `job` table, workers that claim and run jobs,
-//! and the job kinds (cohort generation, model training, fitting a new shape). Heavy work goes to
-//! background threads ([`priority::spawn_background`]); a panic there fails the job, never the
-//! worker.
+//! Background work: a durable queue in the `job` table ([`queue`] is the one way in),
+//! workers that claim and run jobs, and the job kinds ([`Job`]: cohort generation, model
+//! training, fitting a new shape). Heavy work goes to background threads
+//! ([`priority::spawn_background`]); a panic there fails the job, never the worker.
 
 pub mod cohort;
-pub mod conditioned;
-pub mod engine;
 pub mod fit;
-pub mod plan;
 pub mod priority;
+pub mod queue;
+pub mod setup;
 pub mod stats;
 pub mod training;
 pub mod worker;
@@ -23,9 +22,85 @@ use anyhow::anyhow;
 use sqlx::SqlitePool;
 use tracing::Instrument;
 
-use crate::db;
+use crate::cohort::CohortError;
+use crate::db::{self, states::JobKind};
+use crate::engine::Engine;
 use crate::telemetry::ServiceMetrics;
-use engine::CohortEngine;
+pub use queue::{JobQueue, Submission, SubmitError};
+
+/// A job with its typed payload: what a submission stores and a worker runs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Job {
+    /// Generate a cohort's missing shapes and its metrics.
+    Cohort(cohort::CohortPayload),
+    /// Train a model.
+    Training(training::TrainingPayload),
+    /// Fit a latent to a new mesh.
+    Fit(fit::FitPayload),
+}
+
+impl Job {
+    /// Its kind (the `kind` column).
+    pub fn kind(&self) -> JobKind {
+        match self {
+            Self::Cohort(_) => JobKind::Cohort,
+            Self::Training(_) => JobKind::Training,
+            Self::Fit(_) => JobKind::Fit,
+        }
+    }
+
+    /// The payload as stored.
+    pub fn payload_json(&self) -> String {
+        let json = match self {
+            Self::Cohort(p) => serde_json::to_string(p),
+            Self::Training(p) => serde_json::to_string(p),
+            Self::Fit(p) => serde_json::to_string(p),
+        };
+        json.expect("payloads serialise")
+    }
+
+    /// Reads a stored job back.
+    pub fn parse(kind: JobKind, payload: &str) -> serde_json::Result<Self> {
+        Ok(match kind {
+            JobKind::Cohort => Self::Cohort(serde_json::from_str(payload)?),
+            JobKind::Training => Self::Training(serde_json::from_str(payload)?),
+            JobKind::Fit => Self::Fit(serde_json::from_str(payload)?),
+        })
+    }
+}
+
+/// Why a job run did not succeed: the one error channel of every job kind.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// Interrupted by its cancel flag (a cancel request or shutdown); finished work is kept.
+    #[error("interrupted")]
+    Stopped,
+    /// Gave up; a storage fault anywhere in the chain sends the job back to the queue
+    /// instead.
+    #[error("{0:#}")]
+    Failed(anyhow::Error),
+}
+
+impl From<anyhow::Error> for JobError {
+    fn from(e: anyhow::Error) -> Self {
+        Self::Failed(e)
+    }
+}
+
+impl From<sqlx::Error> for JobError {
+    fn from(e: sqlx::Error) -> Self {
+        Self::Failed(e.into())
+    }
+}
+
+impl From<CohortError> for JobError {
+    fn from(e: CohortError) -> Self {
+        match e {
+            CohortError::Cancelled => Self::Stopped,
+            other => Self::Failed(other.into()),
+        }
+    }
+}
 
 /// What a worker needs to run jobs.
 #[derive(Clone)]
@@ -33,7 +108,7 @@ pub struct JobContext {
     /// The database.
     pub pool: SqlitePool,
     /// The science engine.
-    pub engine: Arc<dyn CohortEngine>,
+    pub engine: Arc<dyn Engine>,
     /// Interrupt flags of the jobs running in this process.
     pub controls: JobControls,
     /// Counters for /metrics.
@@ -152,72 +227,83 @@ pub async fn try_execute_job(ctx: &JobContext) -> anyhow::Result<ExecutionOutcom
 }
 
 /// Ends what a job cancelled while still queued was to produce, as its own run ends it on a
-/// cancel: no worker ever claims such a job, so its kind's `finish` runs here. A cohort's state
-/// follows its job's and needs nothing.
-pub async fn finish_cancelled_while_queued(
-    ctx: &JobContext,
-    kind: &str,
-    payload: &str,
-) -> anyhow::Result<()> {
-    match kind {
-        "training" => training::finish_cancelled(ctx, payload).await,
-        "fit" => fit::finish_cancelled(ctx, payload).await,
-        _ => Ok(()),
+/// cancel: no worker ever claims such a job, so its kind's final step runs here.
+pub async fn finish_cancelled_while_queued(ctx: &JobContext, job: &Job) -> anyhow::Result<()> {
+    finish_subject(ctx, job, &RunOutcome::Cancelled).await
+}
+
+/// Brings what a job works on into the state its final outcome implies: a model whose
+/// training or an anchor whose fit did not succeed becomes `failed`. A cohort's state is its
+/// job's, and a released job runs again, so neither needs anything.
+async fn finish_subject(ctx: &JobContext, job: &Job, outcome: &RunOutcome) -> anyhow::Result<()> {
+    if matches!(outcome, RunOutcome::Released | RunOutcome::StorageFault(_)) {
+        return Ok(());
+    }
+    match job {
+        Job::Cohort(_) => Ok(()),
+        Job::Training(p) => training::finish(ctx, p, outcome).await,
+        Job::Fit(p) => fit::finish(ctx, p, outcome).await,
     }
 }
 
-async fn execute(ctx: &JobContext, job: db::jobs::ClaimedJob) -> anyhow::Result<ExecutionOutcome> {
+async fn execute(
+    ctx: &JobContext,
+    claimed: db::jobs::ClaimedJob,
+) -> anyhow::Result<ExecutionOutcome> {
     tracing::info!("job started");
-    let flag = ctx.controls.register(job.job_id);
+    let job_id = claimed.job_id;
+    let flag = ctx.controls.register(job_id);
     let started = Instant::now();
-    let result = match job.kind.as_str() {
-        "cohort" => cohort::run(ctx, &job, &flag).await,
-        "training" => training::run(ctx, &job, &flag).await,
-        "fit" => fit::run(ctx, &job, &flag).await,
-        other => Err(anyhow!("unknown job kind {other:?}")),
+    let job = Job::parse(claimed.kind, &claimed.payload);
+    let result = match &job {
+        Ok(Job::Cohort(p)) => cohort::run(ctx, job_id, p, &flag).await,
+        Ok(Job::Training(p)) => training::run(ctx, job_id, p, &flag).await,
+        Ok(Job::Fit(p)) => fit::run(ctx, job_id, p, &flag).await,
+        Err(e) => Err(JobError::Failed(anyhow!("bad job payload: {e}"))),
     };
-    ctx.controls.unregister(job.job_id);
-    let outcome = result.unwrap_or_else(|e| match db::storage_fault_in(&e) {
-        Some(fault) => RunOutcome::StorageFault(format!("{e:#} ({fault})")),
-        None => RunOutcome::Failed(format!("{e:#}")),
-    });
+    ctx.controls.unregister(job_id);
+    let outcome = match result {
+        Ok(()) => RunOutcome::Succeeded,
+        Err(JobError::Stopped) => stop_outcome(ctx, job_id, &flag).await?,
+        Err(JobError::Failed(e)) => match db::storage_fault_in(&e) {
+            Some(fault) => RunOutcome::StorageFault(format!("{e:#} ({fault})")),
+            None => RunOutcome::Failed(format!("{e:#}")),
+        },
+    };
+    if let Ok(job) = &job {
+        finish_subject(ctx, job, &outcome).await?;
+    }
+    record_outcome(ctx, job_id, &outcome).await?;
+    let seconds = started.elapsed().as_secs_f64();
+    ctx.metrics
+        .observe_job(claimed.kind, outcome.label(), seconds);
+    tracing::info!(outcome = outcome.label(), seconds, "job ended");
+    Ok(ExecutionOutcome::TaskCompleted { job_id, outcome })
+}
+
+/// Writes a run's outcome to the job row (retrying while storage refuses).
+async fn record_outcome(ctx: &JobContext, job_id: i64, outcome: &RunOutcome) -> anyhow::Result<()> {
     use db::jobs::FinalStatus;
-    let (pool, id) = (&ctx.pool, job.job_id);
-    match &outcome {
-        RunOutcome::Succeeded => {
-            write_when_storage_allows(ctx, || {
-                db::jobs::finish(pool, id, FinalStatus::Succeeded, None)
-            })
-            .await?
-        }
-        RunOutcome::Cancelled => {
-            write_when_storage_allows(ctx, || {
-                db::jobs::finish(pool, id, FinalStatus::Cancelled, None)
-            })
-            .await?
-        }
+    let (status, error) = match outcome {
+        RunOutcome::Succeeded => (Some(FinalStatus::Succeeded), None),
+        RunOutcome::Cancelled => (Some(FinalStatus::Cancelled), None),
         RunOutcome::Failed(e) => {
             tracing::error!(error = %e, "job failed");
-            write_when_storage_allows(ctx, || {
-                db::jobs::finish(pool, id, FinalStatus::Failed, Some(e))
-            })
-            .await?
+            (Some(FinalStatus::Failed), Some(e.as_str()))
         }
-        RunOutcome::Released => {
-            write_when_storage_allows(ctx, || db::jobs::release(pool, id)).await?
-        }
+        RunOutcome::Released => (None, None),
         RunOutcome::StorageFault(e) => {
             tracing::warn!(error = %e, "storage fault; the job goes back to the queue");
-            write_when_storage_allows(ctx, || db::jobs::release(pool, id)).await?
+            (None, None)
         }
+    };
+    let pool = &ctx.pool;
+    match status {
+        Some(status) => {
+            write_when_storage_allows(ctx, || db::jobs::finish(pool, job_id, status, error)).await
+        }
+        None => write_when_storage_allows(ctx, || db::jobs::release(pool, job_id)).await,
     }
-    let seconds = started.elapsed().as_secs_f64();
-    ctx.metrics.observe_job(&job.kind, outcome.label(), seconds);
-    tracing::info!(outcome = outcome.label(), seconds, "job ended");
-    Ok(ExecutionOutcome::TaskCompleted {
-        job_id: job.job_id,
-        outcome,
-    })
 }
 
 /// Longest pause between attempts to write while storage is faulty.
@@ -256,19 +342,33 @@ async fn stop_outcome(
     ctx: &JobContext,
     job_id: i64,
     flag: &AtomicBool,
-) -> anyhow::Result<Option<RunOutcome>> {
-    let cancelled = db::jobs::is_cancel_requested(&ctx.pool, job_id).await?;
-    if cancelled {
-        return Ok(Some(RunOutcome::Cancelled));
+) -> anyhow::Result<RunOutcome> {
+    if db::jobs::is_cancel_requested(&ctx.pool, job_id).await? {
+        return Ok(RunOutcome::Cancelled);
     }
-    if flag.load(Ordering::SeqCst) {
-        return Ok(Some(if ctx.controls.is_shutting_down() {
-            RunOutcome::Released
-        } else {
-            RunOutcome::Cancelled
-        }));
+    let shutdown = flag.load(Ordering::SeqCst) && ctx.controls.is_shutting_down();
+    Ok(if shutdown {
+        RunOutcome::Released
+    } else {
+        RunOutcome::Cancelled
+    })
+}
+
+/// An engine error, or [`JobError::Stopped`] when it came from the raised cancel flag.
+fn stopped_or_failed(flag: &AtomicBool, error: anyhow::Error) -> JobError {
+    match flag.load(Ordering::SeqCst) {
+        true => JobError::Stopped,
+        false => JobError::Failed(error),
     }
-    Ok(None)
+}
+
+/// Whether the job's cancel flag is up: a job checks it before starting work it cannot
+/// interrupt.
+fn stopped(flag: &AtomicBool) -> Result<(), JobError> {
+    match flag.load(Ordering::SeqCst) {
+        true => Err(JobError::Stopped),
+        false => Ok(()),
+    }
 }
 
 /// Runs `work` on a background engine thread with a progress counter, and copies the
@@ -320,12 +420,7 @@ async fn store_progress(
 fn join_error(e: tokio::task::JoinError) -> anyhow::Error {
     if e.is_panic() {
         let panic = e.into_panic();
-        let msg = panic
-            .downcast_ref::<&str>()
-            .map(|s| s.to_string())
-            .or_else(|| panic.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "non-string panic payload".into());
-        anyhow!("engine panicked: {msg}")
+        anyhow!("engine panicked: {}", crate::engine::panic_message(&*panic))
     } else {
         anyhow!("engine task was cancelled")
     }

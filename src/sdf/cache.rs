@@ -43,7 +43,7 @@ pub fn dataset_key(meshes: &[(String, TriMesh)], settings: &SamplingSettings) ->
             t.iter().for_each(|c| h.update(c.to_le_bytes()));
         }
     }
-    hex(&h.finalize())
+    crate::digest::hex(&h.finalize())
 }
 
 /// Loads the prepared dataset from `cache_dir` when a valid cache for these inputs exists,
@@ -199,11 +199,6 @@ impl Reader<'_> {
             .map(|_| Ok([self.f32()?, self.f32()?, self.f32()?]))
             .collect()
     }
-}
-
-/// Lower-case hexadecimal of a byte string.
-pub fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 #[cfg(test)]

@@ -14,7 +14,7 @@
 //! - [`field`]: fast evaluation of f and ∇f for one latent over many points.
 //! - [`data`], [`cache`], [`batch`]: training shapes, their one-off samples, reproducible batches.
 //! - [`config`], [`training`], [`manifest`], [`store`]: the training loop and saved models.
-//! - [`reconstruct`], [`evaluation`], [`generate`]: meshes, fidelity and new shapes from latents.
+//! - [`reconstruct`], [`evaluation`], [`mixing`]: meshes, fidelity and mixed latents.
 //!
 //! Sign convention: f < 0 inside, f > 0 outside (forced by the loss with outward normals).
 
@@ -41,13 +41,12 @@ pub use step::{SdfTrainer, TrainStepConfig, TrainStepOutput};
 pub mod anchors;
 pub mod batch;
 pub mod cache;
-pub mod conditioned;
 pub mod config;
 pub mod data;
 pub mod evaluation;
 pub mod fit;
-pub mod generate;
 pub mod manifest;
+pub mod mixing;
 pub mod novelty;
 pub mod reconstruct;
 pub mod store;

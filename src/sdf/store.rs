@@ -11,10 +11,8 @@ use std::path::{Path, PathBuf};
 use burn::optim::ModuleOptimizer;
 use burn::store::{BurnpackStore, ModuleSnapshot};
 use burn::tensor::{Bytes, Device};
-use sha2::{Digest, Sha256};
 
 use super::backend::{Backend, BackendError};
-use super::cache::hex;
 use super::decoder::SdfAutoDecoder;
 use super::field::{FieldError, SdfField};
 use super::manifest::{
@@ -261,7 +259,7 @@ pub fn save_model(
 pub fn file_record(file: &str, bytes: &[u8]) -> FileRecord {
     FileRecord {
         file: file.to_string(),
-        sha256: hex(&Sha256::digest(bytes)),
+        sha256: crate::digest::sha256_hex(bytes),
         bytes: bytes.len() as u64,
     }
 }
@@ -292,7 +290,7 @@ fn read_checked(path: &Path, record: &FileRecord) -> Result<Vec<u8>, ModelLoadEr
             record.bytes
         )));
     }
-    let found = hex(&Sha256::digest(&bytes));
+    let found = crate::digest::sha256_hex(&bytes);
     if found != record.sha256 {
         return Err(corrupted(format!(
             "SHA-256 {found} differs from the manifest's {}",

@@ -8,15 +8,15 @@ use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use anyhow::Context;
+use aortagen::engine::{
+    Engine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
+    TrainingSpec,
+};
 use aortagen::geometry::TriMesh;
 use aortagen::geometry::chamfer::chamfer_distance;
 use aortagen::geometry::normalize::UnitBallTransform;
 use aortagen::geometry::normalize::normalize_to_unit_ball;
-use aortagen::jobs::engine::{
-    CohortEngine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
-    TrainingSpec,
-};
-use aortagen::sdf::generate::{Mixture, noisy_latent};
+use aortagen::sdf::mixing::{Mixture, noisy_latent};
 use aortagen::sdf::novelty::NoveltyReference;
 
 /// Number of training ellipsoids.
@@ -63,7 +63,7 @@ pub struct AnalyticEngine {
     pub panic_on_call: Option<usize>,
 }
 
-impl CohortEngine for AnalyticEngine {
+impl Engine for AnalyticEngine {
     fn model_info(&self, _: &Path) -> anyhow::Result<ModelInfo> {
         Ok(ModelInfo {
             latent_dim: 3,

@@ -149,7 +149,7 @@ async fn an_engine_panic_fails_the_job_and_the_worker_keeps_going() {
     let worker = tokio::spawn(worker::run_worker_until_stopped(
         0,
         app.state.jobs.clone(),
-        app.state.job_wake.clone(),
+        app.state.queue.waker(),
         stop_rx,
     ));
     let broken = app.create_cohort_ok(&cohort_body(3, 2)).await;

@@ -1,6 +1,6 @@
 //! Shape provenance, mesh downloads in every format and unit, caching, cohort metrics.
 
-use aortagen::db::mesh_blob;
+use aortagen::formats::mesh_blob;
 use aortagen::formats::{MeshFormat, read_mesh_bytes};
 use aortagen::geometry::chamfer::chamfer_distance;
 use axum::http::{Method, StatusCode};

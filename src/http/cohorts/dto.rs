@@ -3,22 +3,14 @@
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
-use crate::anatomy::targets::{MAX_CANDIDATES, TargetRange, Targets};
+use crate::cohort::targets::TargetRange;
+use crate::cohort::{CohortFields, Selection, Weighting};
 use crate::db::cohorts::CohortRow;
 use crate::db::shapes::MeasureSummary;
-use crate::http::error::ApiError;
+use crate::db::states::JobStatus;
 use crate::http::jobs::Progress;
-use crate::jobs::engine::ModelInfo;
-use crate::jobs::plan::{Weighting, check_weights};
 use crate::jobs::stats::PairwiseSummary;
-use crate::sdf::generate::Selection;
-
-/// Default marching-cubes resolution (the paper's 256³).
-pub const DEFAULT_RESOLUTION: i64 = 256;
-/// Smallest and largest accepted resolution.
-pub const RESOLUTION_RANGE: (i64, i64) = (32, 1024);
 
 /// Body of `POST /v1/cohorts`.
 #[derive(Debug, Clone, Deserialize, Serialize, utoipa::ToSchema)]
@@ -81,121 +73,28 @@ pub struct CreateCohort {
 }
 
 impl CreateCohort {
-    /// Rules that need no database: ranges, the work budget (`count × resolution³` voxels at
-    /// most `max_voxels`) and the weights' own consistency.
-    pub fn check_shape(&self, max_count: u32, max_voxels: u64) -> Result<(), ApiError> {
-        if !(1..=i64::from(max_count)).contains(&self.count) {
-            let msg = format!("must be between 1 and {max_count}, got {}", self.count);
-            return Err(ApiError::invalid("count", "range", msg));
+    /// The request's fields as the cohort pipeline parses them.
+    pub fn fields(&self) -> CohortFields<i64> {
+        CohortFields {
+            count: self.count,
+            arity: self.arity,
+            weights: self.weights.clone(),
+            weighting: self.weighting,
+            seed: self.seed,
+            resolution: self.resolution,
+            latent_noise: self.latent_noise,
+            selection: self.selection,
+            min_novelty: self.min_novelty,
+            targets: self.targets.clone(),
+            max_candidates: self.max_candidates,
+            anchors: self.anchors.clone(),
         }
-        if self.arity < 2 {
-            let msg = format!("must be at least 2, got {}", self.arity);
-            return Err(ApiError::invalid("arity", "range", msg));
-        }
-        let (lo, hi) = RESOLUTION_RANGE;
-        if let Some(r) = self.resolution.filter(|r| !(lo..=hi).contains(r)) {
-            let msg = format!("must be between {lo} and {hi}, got {r}");
-            return Err(ApiError::invalid("resolution", "range", msg));
-        }
-        let resolution = self.resolution.unwrap_or(DEFAULT_RESOLUTION) as u64;
-        let voxels = (self.count as u64).saturating_mul(resolution.pow(3));
-        if voxels > max_voxels {
-            let most = max_voxels / resolution.pow(3);
-            let msg = format!(
-                "count × resolution³ must not exceed {max_voxels} voxels, got {} × {resolution}³ = \
-                 {voxels}; at resolution {resolution} at most {most} shapes",
-                self.count
-            );
-            return Err(ApiError::invalid("count", "budget", msg));
-        }
-        if let Some(w) = &self.weights {
-            check_weights(w, self.arity as usize).map_err(|m| weights_error(&m))?;
-        }
-        for (field, value) in [
-            ("latent_noise", self.latent_noise),
-            ("min_novelty", self.min_novelty),
-        ] {
-            if let Some(v) = value.filter(|v| !(v.is_finite() && *v >= 0.0)) {
-                let msg = format!("must be a finite number ≥ 0, got {v}");
-                return Err(ApiError::invalid(field, "non-negative", msg));
-            }
-        }
-        self.targets()?;
-        if let Some(anchors) = &self.anchors {
-            check_anchor_list(anchors, self.arity)?;
-        }
-        Ok(())
-    }
-
-    /// The validated targets, if any, and the candidate bound's rules.
-    pub fn targets(&self) -> Result<Option<Targets>, ApiError> {
-        if let Some(m) = self.max_candidates {
-            if !(1..=i64::from(MAX_CANDIDATES)).contains(&m) {
-                let msg = format!("must be between 1 and {MAX_CANDIDATES}, got {m}");
-                return Err(ApiError::invalid("max_candidates", "range", msg));
-            }
-            if self.targets.is_none() {
-                let msg = "applies to targeted cohorts only; give targets too";
-                return Err(ApiError::invalid("max_candidates", "requires-targets", msg));
-            }
-        }
-        let Some(ranges) = &self.targets else {
-            return Ok(None);
-        };
-        Targets::parse(ranges)
-            .map(Some)
-            .map_err(|e| ApiError::invalid(e.field(), e.rule(), e.to_string()))
-    }
-
-    /// Rules against the model: arity within its training shapes.
-    pub fn check_against(&self, info: &ModelInfo) -> Result<(), ApiError> {
-        let n = info.training_shape_count() as i64;
-        if self.arity > n {
-            let msg = format!(
-                "must not exceed the model's {n} training shapes, got {}",
-                self.arity
-            );
-            return Err(ApiError::invalid("arity", "range", msg));
-        }
-        Ok(())
     }
 
     /// SHA-256 over the canonical request, to recognise a retried POST.
     pub fn fingerprint(&self) -> String {
-        let canonical = serde_json::to_vec(self).expect("requests serialise");
-        crate::jobs::cohort::hex(&Sha256::digest(canonical))
+        crate::digest::sha256_hex(&serde_json::to_vec(self).expect("requests serialise"))
     }
-}
-
-/// The anchor list's own rules: 1 ≤ length ≤ arity, distinct ids.
-fn check_anchor_list(anchors: &[i64], arity: i64) -> Result<(), ApiError> {
-    if anchors.is_empty() || anchors.len() as i64 > arity {
-        let msg = format!(
-            "must list 1 to arity = {arity} anchors, got {}",
-            anchors.len()
-        );
-        return Err(ApiError::invalid("anchors", "length", msg));
-    }
-    for (i, id) in anchors.iter().enumerate() {
-        if anchors[..i].contains(id) {
-            let msg = format!("anchor {id} is listed twice");
-            return Err(ApiError::invalid(format!("anchors[{i}]"), "distinct", msg));
-        }
-    }
-    Ok(())
-}
-
-fn weights_error(message: &str) -> ApiError {
-    let rule = if message.contains("entries") {
-        "length"
-    } else if message.contains("finite") {
-        "finite"
-    } else if message.contains("negative") {
-        "non-negative"
-    } else {
-        "sum"
-    };
-    ApiError::invalid("weights", rule, message)
 }
 
 /// A cohort as the API shows it.
@@ -205,8 +104,8 @@ pub struct CohortView {
     pub id: i64,
     /// Model drawn from.
     pub model_id: String,
-    /// queued | running | succeeded | failed | cancelled.
-    pub status: String,
+    /// Where its job stands.
+    pub status: JobStatus,
     /// Shapes stored / requested.
     pub progress: Progress,
     /// Number of shapes requested.
@@ -309,19 +208,16 @@ impl CohortView {
             },
             count: c.count,
             arity: c.arity,
-            weighting: Weighting::parse(&c.weighting).unwrap_or(Weighting::Dirichlet),
-            weights: c.weights.and_then(|w| serde_json::from_str(&w).ok()),
+            weighting: c.weighting,
+            weights: c.weights.map(|w| w.0),
             seed: c.seed as u64,
             resolution: c.resolution,
             latent_noise: c.latent_noise,
-            selection: Selection::parse(&c.selection).unwrap_or_default(),
+            selection: c.selection,
             min_novelty: c.min_novelty,
-            anchors: c
-                .anchors
-                .as_deref()
-                .and_then(|a| serde_json::from_str(a).ok()),
+            anchors: c.anchors.map(|a| a.0),
             redraws_total: c.redraws_total,
-            targets: c.targets.and_then(|t| serde_json::from_str(&t).ok()),
+            targets: c.targets.map(|t| t.0),
             max_candidates: c.max_candidates,
             candidates_total: c.candidates_total,
             targets_not_met: c.targets_not_met,

@@ -9,12 +9,13 @@ use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
+use crate::anatomy::measurement::Measurement;
 use crate::anatomy::shape::ShapeAnatomy;
-use crate::anatomy::targets::{Measurement, TargetRange};
+use crate::cohort::targets::TargetRange;
 use crate::db;
 use crate::http::AppState;
 use crate::http::error::{ApiError, Problem, Result};
-use crate::http::extract::{ApiQuery, parse_id};
+use crate::http::extractors::{ApiQuery, parse_id};
 use crate::jobs::stats::{PairwiseSummary, ValueSummary, summarize_values};
 
 /// Options of the metrics endpoint.
@@ -155,9 +156,7 @@ pub(super) async fn get_cohort_metrics(
         .collect();
     let science = db::shapes::cohort_science(&state.pool, cohort.cohort_id).await?;
     let training_shapes = match db::models::get(&state.pool, &cohort.model_id).await? {
-        Some(model) => serde_json::from_str::<crate::jobs::engine::ModelInfo>(&model.manifest)
-            .map_err(anyhow::Error::from)?
-            .training_shape_count(),
+        Some(model) => model.info().map_or(0, |i| i.training_shape_count()),
         None => 0,
     };
     let novelty = novelty_metrics(&cohort, &science, training_shapes);
@@ -178,8 +177,7 @@ pub(super) async fn get_cohort_metrics(
         matrix: with_matrix.then_some(matrix),
         computed_at: row.created_at,
         novelty,
-        anatomy: anatomy_metrics(&science, cohort.targets.as_deref())
-            .map_err(anyhow::Error::from)?,
+        anatomy: anatomy_metrics(&science, cohort.targets.as_ref().map(|t| &t.0)),
     })
     .into_response())
 }
@@ -212,19 +210,16 @@ fn novelty_metrics(
 
 fn anatomy_metrics(
     shapes: &[db::shapes::ScienceRow],
-    targets: Option<&str>,
-) -> serde_json::Result<AnatomyMetrics> {
-    let measured: Vec<ShapeAnatomy> = shapes
+    targets: Option<&std::collections::BTreeMap<String, TargetRange>>,
+) -> AnatomyMetrics {
+    let measured: Vec<&ShapeAnatomy> = shapes
         .iter()
-        .filter_map(|s| s.anatomy.as_deref())
-        .map(serde_json::from_str)
-        .collect::<serde_json::Result<_>>()?;
-    let ranges: std::collections::BTreeMap<String, TargetRange> = match targets {
-        Some(json) => serde_json::from_str(json)?,
-        None => Default::default(),
-    };
-    let targets = ranges
+        .filter_map(|s| s.anatomy.as_ref().map(|a| &a.0))
+        .collect();
+    let targets = targets
         .into_iter()
+        .flatten()
+        .map(|(name, target)| (name.clone(), *target))
         .filter_map(|(name, target)| {
             let m = Measurement::parse(&name)?;
             let values: Vec<f64> = measured.iter().filter_map(|a| m.value(a)).collect();
@@ -243,9 +238,9 @@ fn anatomy_metrics(
         })
         .collect();
     let summary = |f: fn(&ShapeAnatomy) -> Option<f64>| {
-        summarize_values(measured.iter().filter_map(f).collect())
+        summarize_values(measured.iter().copied().filter_map(f).collect())
     };
-    Ok(AnatomyMetrics {
+    AnatomyMetrics {
         measured: measured.len() as i64,
         roots: measured.iter().filter(|a| a.method == "root").count() as i64,
         failed: (shapes.len() - measured.len()) as i64,
@@ -256,7 +251,7 @@ fn anatomy_metrics(
         length_mm: summary(|a| Some(a.length_mm)),
         targets,
         candidates_total: shapes.iter().filter_map(|s| s.candidates).sum(),
-    })
+    }
 }
 
 fn pairs_csv(ids: &[i64], m: &[Vec<f64>]) -> String {

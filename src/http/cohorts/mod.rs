@@ -12,15 +12,17 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
-use super::extract::{ApiJson, ApiQuery, parse_id};
+use super::extractors::{ApiJson, ApiQuery, parse_id};
 use super::jobs::stop_job;
-use crate::anatomy::targets::{DEFAULT_MAX_CANDIDATES, check_feasible};
-use crate::db::{self, cohorts::CohortRow, jobs::CancelOutcome};
+use crate::cohort::targets::feasibility::check_feasible;
+use crate::cohort::{CohortRequest, RequestLimits, Targets};
+use crate::db::states::{JobStatus, ModelStatus};
+use crate::db::{self, cohorts::CohortRow, jobs::CancelOutcome, models::ModelRow};
+use crate::engine::ModelInfo;
+use crate::jobs::Job;
 use crate::jobs::cohort::CohortPayload;
-use crate::jobs::conditioned::training_anatomy;
-use crate::jobs::engine::ModelInfo;
-use crate::jobs::plan::Weighting;
-use dto::{CohortSummary, CohortView, CreateCohort, DEFAULT_RESOLUTION};
+use crate::jobs::setup::training_anatomy;
+use dto::{CohortSummary, CohortView, CreateCohort};
 
 /// Header that makes a retried POST return the cohort of the first attempt.
 pub const IDEMPOTENCY_KEY: &str = "idempotency-key";
@@ -49,108 +51,89 @@ pub(super) fn router() -> OpenApiRouter<AppState> {
 async fn create_cohort(
     State(state): State<AppState>,
     headers: HeaderMap,
-    ApiJson(req): ApiJson<CreateCohort>,
+    ApiJson(body): ApiJson<CreateCohort>,
 ) -> Result<Response> {
     let key = idempotency_key(&headers)?;
-    req.check_shape(state.config.max_count, state.config.max_cohort_voxels)?;
-    let model = db::models::get(&state.pool, &req.model_id)
+    let limits = RequestLimits {
+        max_count: state.config.max_count,
+        max_voxels: state.config.max_cohort_voxels,
+    };
+    let request = CohortRequest::parse(body.fields(), limits, rand::random::<u64>)?;
+    let model = db::models::get(&state.pool, &body.model_id)
         .await?
-        .ok_or_else(|| ApiError::not_found("model", &req.model_id))?;
-    if model.status != "ready" {
-        return Err(ApiError::Conflict(format!(
-            "model {:?} is {}, not ready",
-            model.model_id, model.status
-        )));
-    }
-    let info: ModelInfo = serde_json::from_str(&model.manifest)
-        .map_err(|e| anyhow::anyhow!("model {} has a bad manifest: {e}", model.model_id))?;
-    req.check_against(&info)?;
-    let targets = req.targets()?;
-    if let Some(targets) = &targets {
-        // The first targeted request on a model measures its training shapes. It waits for
-        // that only a third of the request deadline; past it the cohort is accepted and its
-        // job, which waits for the same measurement, checks the targets instead.
-        let measuring = training_anatomy(
-            &state.pool,
-            state.jobs.engine.clone(),
-            &model.model_id,
-            std::path::Path::new(&model.dir_path),
-            info.training_shape_count(),
-        );
-        let budget = std::time::Duration::from_secs(state.config.request_timeout_secs) / 3;
-        match tokio::time::timeout(budget, measuring).await {
-            Ok(training) => check_feasible(targets, &training?.shapes)
-                .map_err(|e| ApiError::invalid(e.field(), "feasible", e.to_string()))?,
-            Err(_) => tracing::info!(
-                model_id = %model.model_id,
-                "training shapes still being measured; the cohort's job checks its targets"
-            ),
+        .ok_or_else(|| ApiError::not_found("model", &body.model_id))?;
+    let info = match (model.status, model.info()) {
+        (ModelStatus::Ready, Some(info)) => info,
+        _ => {
+            let msg = format!("model {:?} is {}, not ready", model.model_id, model.status);
+            return Err(ApiError::Conflict(msg));
         }
+    };
+    request.check_model(info.training_shape_count())?;
+    if let Some(search) = &request.targets {
+        check_targets(&state, &model, info, &search.targets).await?;
     }
-    let targets_json = targets.map(|t| serde_json::to_string(&t.to_map()).expect("maps serialise"));
-    let anchors = match &req.anchors {
-        Some(ids) => crate::http::anchors::check_cohort_anchors(&state, &req.model_id, ids).await?,
-        None => Vec::new(),
-    };
-    let fingerprint = req.fingerprint();
+    if !request.anchors.is_empty() {
+        crate::http::anchors::check_cohort_anchors(&state, &model.model_id, &request.anchors)
+            .await?;
+    }
+    let fingerprint = body.fingerprint();
 
-    let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
-    let existing = match key.as_deref() {
-        Some(key) => db::cohorts::find_by_idempotency_key(&mut tx, key).await?,
-        None => None,
-    };
-    if let Some(existing) = existing {
+    let mut submission = state.queue.begin().await?;
+    if let Some(key) = key.as_deref()
+        && let Some(existing) = db::cohorts::find_by_idempotency_key(submission.conn(), key).await?
+    {
         if existing.request_hash != fingerprint {
             let msg = "was already used with a different request body";
             return Err(ApiError::invalid("Idempotency-Key", "reused-key", msg));
         }
         return Ok(accepted(existing, true));
     }
-    let pending = db::jobs::count_pending(&mut *tx).await?;
-    if pending >= state.config.max_queue {
-        return Err(ApiError::QueueFull {
-            pending,
-            retry_after: state.config.retry_after_secs,
-        });
-    }
-    let job_id = db::jobs::enqueue(&mut tx, "cohort", &serde_json::json!({}), req.count).await?;
-    let seed = req.seed.unwrap_or_else(rand::random::<u64>);
-    let weighting = req.weighting.unwrap_or(Weighting::Dirichlet);
-    let cohort_id = db::cohorts::insert(
-        &mut tx,
-        &db::cohorts::NewCohort {
-            model_id: &req.model_id,
-            job_id,
-            count: req.count,
-            arity: req.arity,
-            weighting: weighting.as_str(),
-            weights: req.weights.as_deref(),
-            seed: seed as i64,
-            resolution: req.resolution.unwrap_or(DEFAULT_RESOLUTION),
-            latent_noise: req.latent_noise.unwrap_or(0.0),
-            selection: req.selection.unwrap_or_default().as_str(),
-            min_novelty: req.min_novelty,
-            targets: targets_json.as_deref(),
-            max_candidates: targets_json.is_some().then(|| {
-                req.max_candidates
-                    .unwrap_or(i64::from(DEFAULT_MAX_CANDIDATES))
-            }),
-            idempotency_key: key.as_deref(),
-            request_hash: &fingerprint,
-        },
-    )
-    .await?;
-    if !anchors.is_empty() {
-        db::anchors::set_cohort_anchors(&mut tx, cohort_id, &anchors).await?;
-    }
-    let payload = serde_json::to_value(CohortPayload { cohort_id }).map_err(anyhow::Error::from)?;
-    db::jobs::set_payload(&mut tx, job_id, &payload).await?;
-    tx.commit().await?;
-    state.job_wake.notify_one();
-    tracing::info!(cohort_id, job_id, count = req.count, "cohort queued");
+    let cohort_id = db::cohorts::next_id(submission.conn()).await?;
+    let job = Job::Cohort(CohortPayload { cohort_id });
+    let job_id = submission.enqueue(&job, i64::from(request.count)).await?;
+    let row = db::cohorts::NewCohort {
+        cohort_id,
+        model_id: &model.model_id,
+        job_id,
+        request: &request,
+        idempotency_key: key.as_deref(),
+        request_hash: &fingerprint,
+    };
+    db::cohorts::insert(submission.conn(), &row).await?;
+    submission.commit().await?;
+    tracing::info!(cohort_id, job_id, count = request.count, "cohort queued");
 
     let cohort = load(&state, cohort_id, &cohort_id.to_string()).await?;
     Ok(accepted(cohort, false))
+}
+
+/// Checks targets against the model's training shapes. The first targeted request on a
+/// model measures them; it waits for that only a third of the request deadline, past which
+/// the cohort is accepted and its job, which waits for the same measurement, checks the
+/// targets instead.
+async fn check_targets(
+    state: &AppState,
+    model: &ModelRow,
+    info: &ModelInfo,
+    targets: &Targets,
+) -> Result<()> {
+    let measuring = training_anatomy(
+        &state.pool,
+        state.jobs.engine.clone(),
+        &model.model_id,
+        std::path::Path::new(&model.dir_path),
+        info.training_shape_count(),
+    );
+    let budget = std::time::Duration::from_secs(state.config.request_timeout_secs) / 3;
+    match tokio::time::timeout(budget, measuring).await {
+        Ok(training) => check_feasible(targets, &training?.shapes)?,
+        Err(_) => tracing::info!(
+            model_id = %model.model_id,
+            "training shapes still being measured; the cohort's job checks its targets"
+        ),
+    }
+    Ok(())
 }
 
 fn accepted(cohort: CohortRow, replayed: bool) -> Response {
@@ -212,23 +195,18 @@ async fn list_cohorts(
     State(state): State<AppState>,
     ApiQuery(f): ApiQuery<CohortFilter>,
 ) -> Result<Json<CohortPage>> {
-    const STATES: [&str; 5] = ["queued", "running", "succeeded", "failed", "cancelled"];
-    if let Some(s) = f.status.as_deref().filter(|s| !STATES.contains(s)) {
-        let message = format!("status must be one of {}, got {s:?}", STATES.join(", "));
-        return Err(ApiError::BadRequest {
-            field: Some("status".into()),
-            message,
-        });
-    }
+    let status = match f.status.as_deref() {
+        None => None,
+        Some(s) => Some(JobStatus::parse(s).ok_or_else(|| {
+            let names: Vec<&str> = JobStatus::ALL.iter().map(|s| s.as_str()).collect();
+            ApiError::BadRequest {
+                field: Some("status".into()),
+                message: format!("status must be one of {}, got {s:?}", names.join(", ")),
+            }
+        })?),
+    };
     let (limit, offset) = page(f.limit, f.offset)?;
-    let rows = db::cohorts::list(
-        &state.pool,
-        f.model_id.as_deref(),
-        f.status.as_deref(),
-        limit,
-        offset,
-    )
-    .await?;
+    let rows = db::cohorts::list(&state.pool, f.model_id.as_deref(), status, limit, offset).await?;
     let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
     Ok(Json(CohortPage {
         items: rows.into_iter().map(CohortView::from_row).collect(),
@@ -309,7 +287,7 @@ async fn delete_cohort(
     Path(id): Path<String>,
 ) -> Result<StatusCode> {
     let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
-    if cohort.status == "running" {
+    if cohort.status == JobStatus::Running {
         let msg = format!("cohort {id} is running; cancel it first (POST /v1/cohorts/{id}/cancel)");
         return Err(ApiError::Conflict(msg));
     }

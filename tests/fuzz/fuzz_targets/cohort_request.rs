@@ -4,7 +4,7 @@
 #![no_main]
 
 use aortagen::http::cohorts::dto::{CreateCohort, RESOLUTION_RANGE};
-use aortagen::http::extract::parse_json;
+use aortagen::http::extractors::parse_json;
 use aortagen::jobs::plan::check_weights;
 use libfuzzer_sys::fuzz_target;
 

@@ -1,6 +1,11 @@
-//! What the job worker needs from the science engine. The service depends only on this
-//! trait, so the model, extraction and metrics code plug in behind it and tests can run
-//! the whole service on an analytic stand-in.
+//! The science engine: what cohorts, jobs and the command line need from a trained model.
+//! Everything above this module depends only on the [`Engine`] trait, so the neural model
+//! ([`SdfEngine`]) plugs in behind it and tests can run the whole service on an analytic
+//! stand-in.
+
+mod neural;
+
+pub use neural::{EVALUATION_FILE, SdfEngine, read_evaluation};
 
 use std::path::Path;
 use std::sync::Arc;
@@ -62,11 +67,25 @@ pub struct ShapeSpec {
     pub anchors: Vec<AnchorLatent>,
 }
 
+impl ShapeSpec {
+    /// Training shape `index` alone (weight 1, no noise), meshed at `resolution`.
+    pub fn single(index: usize, resolution: usize) -> Self {
+        Self {
+            training_indices: vec![index],
+            weights: vec![1.0],
+            seed: 0,
+            resolution,
+            latent_noise: 0.0,
+            anchors: Vec::new(),
+        }
+    }
+}
+
 /// A fitted latent (an anchor) taking part in a mixture.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AnchorLatent {
-    /// The anchor's id.
-    pub anchor_id: i64,
+    /// The anchor's name (unique per model).
+    pub name: String,
     /// Its latent code.
     pub latent: Vec<f32>,
     /// Its mesh's unit-ball transform (blended like the training shapes').
@@ -125,7 +144,7 @@ pub struct FittedAnchor {
 
 /// The science engine, as the job worker calls it. Every method is blocking CPU work and is
 /// called inside `spawn_blocking`.
-pub trait CohortEngine: Send + Sync + 'static {
+pub trait Engine: Send + Sync + 'static {
     /// Facts about the model stored in `model_dir` (used for validation and the API).
     fn model_info(&self, model_dir: &Path) -> anyhow::Result<ModelInfo>;
 
@@ -179,6 +198,15 @@ pub trait CohortEngine: Send + Sync + 'static {
     }
 }
 
+/// The text of a panic's payload (the engine's numerics report failures by panicking).
+pub fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "non-string panic payload".into())
+}
+
 /// An engine that refuses every call: what the service runs on when no science engine is
 /// linked in. Jobs fail with a clear message instead of the service refusing to start.
 #[derive(Debug, Clone, Copy, Default)]
@@ -190,7 +218,7 @@ impl UnavailableEngine {
     }
 }
 
-impl CohortEngine for UnavailableEngine {
+impl Engine for UnavailableEngine {
     fn model_info(&self, _: &Path) -> anyhow::Result<ModelInfo> {
         self.refuse()
     }

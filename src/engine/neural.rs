@@ -1,5 +1,5 @@
 //! The science engine behind the service: trained SDF models, fast surface extraction and
-//! Chamfer metrics, exposed through [`CohortEngine`] so the job worker calls the very library
+//! Chamfer metrics, exposed through [`Engine`] so the job worker calls the very library
 //! code the command line uses.
 
 use std::collections::HashMap;
@@ -10,20 +10,20 @@ use std::sync::{Arc, Mutex};
 use anyhow::{Context, bail};
 use rayon::prelude::*;
 
+use super::{
+    Engine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
+    TrainingSpec,
+};
 use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
 use crate::geometry::sampling::sample_surface;
-use crate::jobs::engine::{
-    CohortEngine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
-    TrainingSpec,
-};
 use crate::sdf::backend::Backend;
 use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
 use crate::sdf::evaluation::EvaluationReport;
 use crate::sdf::fit::{FitSettings, fit_mesh};
-use crate::sdf::generate::{AnchorPart, Mixture, anchored_latent};
 use crate::sdf::manifest::MANIFEST_FILE;
+use crate::sdf::mixing::{AnchorPart, Mixture, anchored_latent};
 use crate::sdf::novelty::{NoveltyReference, training_surfaces};
 use crate::sdf::reconstruct::{ExtractionMethod, reconstruct};
 use crate::sdf::store::LoadedModel;
@@ -39,7 +39,7 @@ struct CachedModel {
     latents: Vec<Vec<f32>>,
 }
 
-/// The [`CohortEngine`] backed by trained neural SDF models.
+/// The [`Engine`] backed by trained neural SDF models.
 pub struct SdfEngine {
     backend: Backend,
     extraction: ExtractionMethod,
@@ -61,6 +61,12 @@ impl SdfEngine {
             models: Mutex::new(HashMap::new()),
             references: Mutex::new(HashMap::new()),
         }
+    }
+
+    /// Extracts surfaces with `extraction` (fast by default; both give the same mesh).
+    pub fn with_extraction(mut self, extraction: ExtractionMethod) -> Self {
+        self.extraction = extraction;
+        self
     }
 
     /// Uses `points` surface samples per shape for the cohort's pairwise Chamfer distances
@@ -87,7 +93,7 @@ impl SdfEngine {
     }
 }
 
-impl CohortEngine for SdfEngine {
+impl Engine for SdfEngine {
     fn model_info(&self, model_dir: &Path) -> anyhow::Result<ModelInfo> {
         let cached = self.model(model_dir)?;
         let cached = cached

@@ -52,6 +52,11 @@ pub fn encode(mesh: &TriMesh) -> Vec<u8> {
     out
 }
 
+/// The hex SHA-256 of an encoded mesh: the identity of a stored shape's geometry.
+pub fn sha256_hex(encoded: &[u8]) -> String {
+    crate::digest::sha256_hex(encoded)
+}
+
 /// Decodes and validates a blob written by [`encode`].
 pub fn decode(bytes: &[u8]) -> Result<TriMesh, MeshBlobError> {
     if bytes.len() < HEADER_LEN || &bytes[..4] != MAGIC {

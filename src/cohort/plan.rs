@@ -1,0 +1,225 @@
+//! How a cohort turns into per-shape specifications: which training shapes each draw mixes
+//! (and which fitted anchors), with which weights, all derived from the cohort seed by the
+//! [`seeds`](super::seeds) scheme so a cohort can be replayed bit for bit.
+
+use std::sync::Arc;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::request::CohortRequest;
+use super::seeds::{attempt_seed, shape_seed};
+use super::selection::{Selection, choose_distinct, select_spread};
+use super::weights::WeightChoice;
+use crate::engine::{AnchorLatent, ShapeSpec};
+
+/// Everything needed to derive every draw of every shape of a cohort.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CohortPlan {
+    /// Training shapes of the model.
+    pub training_shapes: usize,
+    /// Shapes mixed per generated shape, anchors included.
+    pub arity: usize,
+    /// Where the weights come from.
+    pub weights: WeightChoice,
+    /// Cohort seed.
+    pub seed: u64,
+    /// Marching-cubes resolution.
+    pub resolution: usize,
+    /// How the training latents are picked.
+    pub selection: Selection,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: f64,
+    /// The training latents (needed by [`Selection::Spread`] only).
+    pub latents: Option<Arc<Vec<Vec<f32>>>>,
+    /// Fitted anchors forced into every shape, in the request's order.
+    pub anchors: Vec<AnchorLatent>,
+}
+
+impl CohortPlan {
+    /// The plan of `request` on a model with `training_shapes` shapes (the request's rules
+    /// against the model hold: see [`CohortRequest::check_model`]); `latents` are the
+    /// training latents when the selection needs them, `anchors` the request's anchors.
+    pub fn new<A>(
+        request: &CohortRequest<A>,
+        training_shapes: usize,
+        latents: Option<Arc<Vec<Vec<f32>>>>,
+        anchors: Vec<AnchorLatent>,
+    ) -> Self {
+        Self {
+            training_shapes,
+            arity: request.arity,
+            weights: request.weights.clone(),
+            seed: request.seed,
+            resolution: request.resolution,
+            selection: request.selection,
+            latent_noise: request.latent_noise,
+            latents,
+            anchors,
+        }
+    }
+
+    /// The specification of shape `index`; depends only on the plan and the index, so a
+    /// resumed job regenerates exactly what an uninterrupted one would have.
+    pub fn shape_spec(&self, index: u64) -> ShapeSpec {
+        self.shape_spec_attempt(index, 0)
+    }
+
+    /// Draw `attempt` of shape `index` with the anchors forced in; draw 0 is
+    /// [`Self::shape_spec`].
+    pub fn shape_spec_attempt(&self, index: u64, attempt: u32) -> ShapeSpec {
+        self.with_anchors(self.draw(index, attempt))
+    }
+
+    /// Draw `attempt` of shape `index` before the anchors are forced in: `arity` training
+    /// shapes and `arity` weights, from the draw's own seed.
+    pub fn draw(&self, index: u64, attempt: u32) -> ShapeSpec {
+        let seed = attempt_seed(shape_seed(self.seed, index), attempt);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let training_indices = match (self.selection, &self.latents) {
+            (Selection::Spread, Some(latents)) => select_spread(&mut rng, latents, self.arity),
+            _ => choose_distinct(&mut rng, self.training_shapes, self.arity),
+        };
+        let weights = self.weights.draw(&mut rng, self.arity);
+        ShapeSpec {
+            training_indices,
+            weights,
+            seed,
+            resolution: self.resolution,
+            latent_noise: self.latent_noise,
+            anchors: Vec::new(),
+        }
+    }
+
+    /// Forces the plan's anchors into a draw: they take the places of its last training
+    /// picks (and their weights), so the mixture still has `arity` members and every other
+    /// draw of the plan is unchanged.
+    pub fn with_anchors(&self, mut spec: ShapeSpec) -> ShapeSpec {
+        if self.anchors.is_empty() {
+            return spec;
+        }
+        let keep = spec
+            .training_indices
+            .len()
+            .saturating_sub(self.anchors.len());
+        spec.training_indices.truncate(keep);
+        spec.anchors = self.anchors.clone();
+        spec
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cohort::weights::check_weights;
+
+    fn plan(weights: WeightChoice) -> CohortPlan {
+        CohortPlan {
+            training_shapes: 10,
+            arity: 4,
+            weights,
+            seed: 42,
+            resolution: 64,
+            selection: Selection::Uniform,
+            latent_noise: 0.0,
+            latents: None,
+            anchors: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn redraws_have_their_own_seeds_and_spread_uses_the_latents() {
+        let p = plan(WeightChoice::Dirichlet);
+        assert_eq!(p.shape_spec_attempt(5, 0), p.shape_spec(5));
+        let first = p.shape_spec_attempt(5, 0);
+        let second = p.shape_spec_attempt(5, 1);
+        assert_ne!(first.seed, second.seed);
+        assert_eq!(second, p.shape_spec_attempt(5, 1));
+        // Latents 0–7 coincide at the origin, 8 and 9 lie far away: a spread pair always
+        // contains one of the far ones, a uniform pair often does not.
+        let mut latents = vec![vec![0.0f32; 2]; 10];
+        latents[8] = vec![5.0, 0.0];
+        latents[9] = vec![0.0, 5.0];
+        let spread = CohortPlan {
+            arity: 2,
+            selection: Selection::Spread,
+            latents: Some(Arc::new(latents)),
+            ..p.clone()
+        };
+        let uniform = CohortPlan {
+            arity: 2,
+            ..p.clone()
+        };
+        let far = |plan: &CohortPlan| {
+            (0..100)
+                .filter(|&i| plan.shape_spec(i).training_indices.iter().any(|&j| j >= 8))
+                .count()
+        };
+        assert_eq!(far(&spread), 100);
+        assert!(far(&uniform) < 60, "{}", far(&uniform));
+    }
+
+    #[test]
+    fn specs_are_reproducible_and_differ_between_shapes() {
+        let p = plan(WeightChoice::Dirichlet);
+        assert_eq!(p.shape_spec(3), p.shape_spec(3));
+        assert_ne!(p.shape_spec(3), p.shape_spec(4));
+        let other_seed = CohortPlan {
+            seed: 43,
+            ..p.clone()
+        };
+        assert_ne!(p.shape_spec(3), other_seed.shape_spec(3));
+    }
+
+    #[test]
+    fn training_indices_are_distinct_and_in_range() {
+        let p = plan(WeightChoice::Equal);
+        for i in 0..200 {
+            let mut idx = p.shape_spec(i).training_indices;
+            assert!(idx.iter().all(|&j| j < 10));
+            idx.sort_unstable();
+            idx.dedup();
+            assert_eq!(idx.len(), 4, "shape {i}");
+        }
+    }
+
+    #[test]
+    fn generated_weights_lie_on_the_simplex() {
+        assert_eq!(
+            plan(WeightChoice::Equal).shape_spec(0).weights,
+            vec![0.25; 4]
+        );
+        let p = plan(WeightChoice::Dirichlet);
+        for i in 0..200 {
+            let w = p.shape_spec(i).weights;
+            assert!(check_weights(&w, 4).is_ok(), "{w:?}");
+        }
+    }
+
+    #[test]
+    fn forced_anchors_replace_the_last_training_picks_and_keep_the_weights() {
+        let anchor = AnchorLatent {
+            name: "patient".into(),
+            latent: vec![0.5; 3],
+            transform: crate::geometry::normalize::UnitBallTransform::IDENTITY,
+        };
+        let p = plan(WeightChoice::Dirichlet);
+        let anchored = CohortPlan {
+            anchors: vec![anchor.clone()],
+            ..p.clone()
+        };
+        let drawn = p.shape_spec(4);
+        let forced = anchored.shape_spec(4);
+        assert_eq!(forced.training_indices, drawn.training_indices[..3]);
+        assert_eq!(forced.weights, drawn.weights);
+        assert_eq!(forced.anchors, [anchor]);
+        assert_eq!(forced.seed, drawn.seed);
+        assert_eq!(p.with_anchors(drawn.clone()), drawn);
+    }
+
+    #[test]
+    fn explicit_weights_are_used_for_every_shape() {
+        let p = plan(WeightChoice::Fixed(vec![0.1, 0.2, 0.3, 0.4]));
+        assert_eq!(p.shape_spec(7).weights, vec![0.1, 0.2, 0.3, 0.4]);
+    }
+}

@@ -1,0 +1,464 @@
+//! The cohort request (DESIGN §4), parsed once: [`CohortFields`] is what arrives (an HTTP
+//! body or command-line flags), [`CohortRequest`] what the rest of the code works with. Every
+//! rule is checked on the way in and a broken one is a [`RequestError`] naming the field and
+//! the rule, so the API and the command line refuse the same requests with the same words.
+
+use std::collections::BTreeMap;
+use std::fmt::Display;
+
+use super::targets::{DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, TargetError, TargetRange, Targets};
+use super::weights::{WeightChoice, WeightError, Weighting};
+use super::{DEFAULT_RESOLUTION, RESOLUTION_RANGE, Selection};
+
+/// A cohort request as it arrives, before its rules are checked. `A` names an anchor: an id
+/// in the service, a name in a model directory's `anchors.json` on the command line.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct CohortFields<A> {
+    /// Number of shapes.
+    pub count: i64,
+    /// Shapes mixed per generated shape, anchors included.
+    pub arity: i64,
+    /// Explicit weights (length = arity).
+    pub weights: Option<Vec<f64>>,
+    /// Weight strategy when `weights` is absent (default Dirichlet).
+    pub weighting: Option<Weighting>,
+    /// Seed (drawn when absent).
+    pub seed: Option<u64>,
+    /// Marching-cubes resolution per axis.
+    pub resolution: Option<i64>,
+    /// Latent noise in training standard deviations.
+    pub latent_noise: Option<f64>,
+    /// How the training latents are picked.
+    pub selection: Option<Selection>,
+    /// Smallest accepted Chamfer distance to the nearest training shape.
+    pub min_novelty: Option<f64>,
+    /// Target ranges (mm) keyed by measurement name.
+    pub targets: Option<BTreeMap<String, TargetRange>>,
+    /// Most candidates per targeted shape.
+    pub max_candidates: Option<i64>,
+    /// Fitted anchors forced into every shape.
+    pub anchors: Option<Vec<A>>,
+}
+
+/// Bounds the service configures on a request (the command line has none).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RequestLimits {
+    /// Most shapes per cohort.
+    pub max_count: u32,
+    /// Most `count × resolution³` voxels per cohort (the work budget).
+    pub max_voxels: u64,
+}
+
+impl RequestLimits {
+    /// No bound beyond what the types hold.
+    pub const NONE: Self = Self {
+        max_count: u32::MAX,
+        max_voxels: u64::MAX,
+    };
+}
+
+/// A valid cohort request.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CohortRequest<A> {
+    /// Number of shapes (≥ 1).
+    pub count: u32,
+    /// Shapes mixed per generated shape, anchors included (≥ 2).
+    pub arity: usize,
+    /// Where each shape's weights come from.
+    pub weights: WeightChoice,
+    /// The seed (given, or drawn when the request was parsed).
+    pub seed: u64,
+    /// Marching-cubes resolution within [`RESOLUTION_RANGE`].
+    pub resolution: usize,
+    /// How the training latents are picked.
+    pub selection: Selection,
+    /// Latent noise (finite, ≥ 0; 0 = plain convex combinations).
+    pub latent_noise: f64,
+    /// Smallest accepted novelty (finite, ≥ 0), if any.
+    pub min_novelty: Option<f64>,
+    /// Anatomical targets and the candidate bound, if any.
+    pub targets: Option<TargetSearch>,
+    /// Distinct anchors, at most `arity` of them (empty: none).
+    pub anchors: Vec<A>,
+}
+
+/// The targets of a conditioned cohort.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetSearch {
+    /// The ranges.
+    pub targets: Targets,
+    /// Most candidates per shape (1–[`MAX_CANDIDATES`]).
+    pub max_candidates: u32,
+}
+
+/// A broken rule of a cohort request.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{field}: {message}")]
+pub struct RequestError {
+    /// The offending field (a JSON path such as `targets.annulus_mm.min` or `anchors[1]`).
+    pub field: String,
+    /// Short rule name (`range`, `budget`, `sum`, `feasible`, …).
+    pub rule: &'static str,
+    /// Human sentence.
+    pub message: String,
+}
+
+impl RequestError {
+    /// A broken `rule` of `field`.
+    pub fn new(field: impl Into<String>, rule: &'static str, message: impl Into<String>) -> Self {
+        Self {
+            field: field.into(),
+            rule,
+            message: message.into(),
+        }
+    }
+}
+
+impl From<WeightError> for RequestError {
+    fn from(e: WeightError) -> Self {
+        Self::new("weights", e.rule(), e.to_string())
+    }
+}
+
+impl From<TargetError> for RequestError {
+    fn from(e: TargetError) -> Self {
+        Self::new(e.field(), e.rule(), e.to_string())
+    }
+}
+
+impl From<super::Infeasible> for RequestError {
+    fn from(e: super::Infeasible) -> Self {
+        Self::new(e.field(), "feasible", e.to_string())
+    }
+}
+
+impl<A: PartialEq + Display + Clone> CohortRequest<A> {
+    /// Checks every rule that needs no model, in a fixed order, and returns the typed
+    /// request; `draw_seed` gives the seed when the request has none.
+    pub fn parse(
+        fields: CohortFields<A>,
+        limits: RequestLimits,
+        draw_seed: impl FnOnce() -> u64,
+    ) -> Result<Self, RequestError> {
+        let count = check_count(fields.count, limits.max_count)?;
+        if fields.arity < 2 {
+            let msg = format!("must be at least 2, got {}", fields.arity);
+            return Err(RequestError::new("arity", "range", msg));
+        }
+        let arity = usize::try_from(fields.arity).unwrap_or(usize::MAX);
+        let resolution = check_resolution(fields.resolution)?;
+        check_budget(count, resolution, limits.max_voxels)?;
+        let weighting = fields.weighting.unwrap_or_default();
+        let weights = WeightChoice::new(fields.weights, weighting, arity)?;
+        let latent_noise = non_negative("latent_noise", fields.latent_noise)?.unwrap_or(0.0);
+        let min_novelty = non_negative("min_novelty", fields.min_novelty)?;
+        let targets = target_search(fields.targets, fields.max_candidates)?;
+        let anchors = fields
+            .anchors
+            .map(|a| check_anchors(a, arity))
+            .transpose()?;
+        Ok(Self {
+            count,
+            arity,
+            weights,
+            seed: fields.seed.unwrap_or_else(draw_seed),
+            resolution,
+            selection: fields.selection.unwrap_or_default(),
+            latent_noise,
+            min_novelty,
+            targets,
+            anchors: anchors.unwrap_or_default(),
+        })
+    }
+
+    /// The rule against the model: the arity within its training shapes.
+    pub fn check_model(&self, training_shapes: usize) -> Result<(), RequestError> {
+        if self.arity > training_shapes {
+            let msg = format!(
+                "must not exceed the model's {training_shapes} training shapes, got {}",
+                self.arity
+            );
+            return Err(RequestError::new("arity", "range", msg));
+        }
+        Ok(())
+    }
+
+    /// Draws per shape at most: candidates with targets, redraws with a minimum novelty,
+    /// one otherwise.
+    pub fn draws_per_shape(&self) -> u32 {
+        match (&self.targets, self.min_novelty) {
+            (Some(t), _) => t.max_candidates,
+            (None, Some(_)) => super::MAX_REDRAWS + 1,
+            (None, None) => 1,
+        }
+    }
+}
+
+fn check_count(count: i64, max_count: u32) -> Result<u32, RequestError> {
+    if !(1..=i64::from(max_count)).contains(&count) {
+        let msg = format!("must be between 1 and {max_count}, got {count}");
+        return Err(RequestError::new("count", "range", msg));
+    }
+    Ok(count as u32)
+}
+
+fn check_resolution(resolution: Option<i64>) -> Result<usize, RequestError> {
+    let (lo, hi) = (
+        *RESOLUTION_RANGE.start() as i64,
+        *RESOLUTION_RANGE.end() as i64,
+    );
+    match resolution {
+        None => Ok(DEFAULT_RESOLUTION),
+        Some(r) if (lo..=hi).contains(&r) => Ok(r as usize),
+        Some(r) => {
+            let msg = format!("must be between {lo} and {hi}, got {r}");
+            Err(RequestError::new("resolution", "range", msg))
+        }
+    }
+}
+
+/// The work budget `count × resolution³`, named on `count`.
+fn check_budget(count: u32, resolution: usize, max_voxels: u64) -> Result<(), RequestError> {
+    let cube = (resolution as u64).pow(3);
+    let voxels = u64::from(count).saturating_mul(cube);
+    if voxels > max_voxels {
+        let most = max_voxels / cube;
+        let msg = format!(
+            "count × resolution³ must not exceed {max_voxels} voxels, got {count} × \
+             {resolution}³ = {voxels}; at resolution {resolution} at most {most} shapes"
+        );
+        return Err(RequestError::new("count", "budget", msg));
+    }
+    Ok(())
+}
+
+fn non_negative(field: &str, value: Option<f64>) -> Result<Option<f64>, RequestError> {
+    match value {
+        Some(v) if !(v.is_finite() && v >= 0.0) => {
+            let msg = format!("must be a finite number ≥ 0, got {v}");
+            Err(RequestError::new(field, "non-negative", msg))
+        }
+        other => Ok(other),
+    }
+}
+
+fn target_search(
+    ranges: Option<BTreeMap<String, TargetRange>>,
+    max_candidates: Option<i64>,
+) -> Result<Option<TargetSearch>, RequestError> {
+    if let Some(m) = max_candidates {
+        if !(1..=i64::from(MAX_CANDIDATES)).contains(&m) {
+            let msg = format!("must be between 1 and {MAX_CANDIDATES}, got {m}");
+            return Err(RequestError::new("max_candidates", "range", msg));
+        }
+        if ranges.is_none() {
+            let msg = "applies to targeted cohorts only; give targets too";
+            return Err(RequestError::new("max_candidates", "requires-targets", msg));
+        }
+    }
+    let Some(ranges) = ranges else {
+        return Ok(None);
+    };
+    Ok(Some(TargetSearch {
+        targets: Targets::parse(&ranges)?,
+        max_candidates: max_candidates.map_or(DEFAULT_MAX_CANDIDATES, |m| m as u32),
+    }))
+}
+
+/// The anchor list's own rules: 1 ≤ length ≤ arity, distinct.
+fn check_anchors<A: PartialEq + Display>(
+    anchors: Vec<A>,
+    arity: usize,
+) -> Result<Vec<A>, RequestError> {
+    if anchors.is_empty() || anchors.len() > arity {
+        let msg = format!(
+            "must list 1 to arity = {arity} anchors, got {}",
+            anchors.len()
+        );
+        return Err(RequestError::new("anchors", "length", msg));
+    }
+    for (i, a) in anchors.iter().enumerate() {
+        if anchors[..i].contains(a) {
+            let msg = format!("anchor {a} is listed twice");
+            return Err(RequestError::new(format!("anchors[{i}]"), "distinct", msg));
+        }
+    }
+    Ok(anchors)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fields() -> CohortFields<i64> {
+        CohortFields {
+            count: 3,
+            arity: 2,
+            ..CohortFields::default()
+        }
+    }
+
+    fn parse(f: CohortFields<i64>) -> Result<CohortRequest<i64>, RequestError> {
+        let limits = RequestLimits {
+            max_count: 10,
+            max_voxels: 3 * 64u64.pow(3),
+        };
+        CohortRequest::parse(f, limits, || 99)
+    }
+
+    #[test]
+    fn defaults_fill_what_the_request_leaves_out() {
+        let f = CohortFields {
+            resolution: Some(64),
+            ..fields()
+        };
+        let r = parse(f).unwrap();
+        assert_eq!((r.count, r.arity, r.seed, r.resolution), (3, 2, 99, 64));
+        assert_eq!(r.weights, WeightChoice::Dirichlet);
+        assert_eq!((r.selection, r.latent_noise), (Selection::Uniform, 0.0));
+        assert!(r.targets.is_none() && r.anchors.is_empty() && r.min_novelty.is_none());
+        assert_eq!(r.draws_per_shape(), 1);
+    }
+
+    #[test]
+    fn each_broken_rule_names_its_field_and_rule() {
+        let at64 = |f: CohortFields<i64>| CohortFields {
+            resolution: Some(64),
+            ..f
+        };
+        let cases: Vec<(CohortFields<i64>, &str, &str)> = vec![
+            (
+                CohortFields {
+                    count: 0,
+                    ..fields()
+                },
+                "count",
+                "range",
+            ),
+            (
+                CohortFields {
+                    count: 11,
+                    ..fields()
+                },
+                "count",
+                "range",
+            ),
+            (
+                CohortFields {
+                    arity: 1,
+                    ..fields()
+                },
+                "arity",
+                "range",
+            ),
+            (
+                CohortFields {
+                    resolution: Some(16),
+                    ..fields()
+                },
+                "resolution",
+                "range",
+            ),
+            // The default resolution (256³) is over this budget.
+            (fields(), "count", "budget"),
+            (
+                at64(CohortFields {
+                    weights: Some(vec![0.5, 0.6]),
+                    ..fields()
+                }),
+                "weights",
+                "sum",
+            ),
+            (
+                at64(CohortFields {
+                    latent_noise: Some(-1.0),
+                    ..fields()
+                }),
+                "latent_noise",
+                "non-negative",
+            ),
+            (
+                at64(CohortFields {
+                    min_novelty: Some(f64::NAN),
+                    ..fields()
+                }),
+                "min_novelty",
+                "non-negative",
+            ),
+            (
+                at64(CohortFields {
+                    max_candidates: Some(3),
+                    ..fields()
+                }),
+                "max_candidates",
+                "requires-targets",
+            ),
+            (
+                at64(CohortFields {
+                    anchors: Some(vec![1, 2, 3]),
+                    ..fields()
+                }),
+                "anchors",
+                "length",
+            ),
+            (
+                at64(CohortFields {
+                    anchors: Some(vec![4, 4]),
+                    ..fields()
+                }),
+                "anchors[1]",
+                "distinct",
+            ),
+        ];
+        for (f, field, rule) in cases {
+            let err = parse(f.clone()).unwrap_err();
+            assert_eq!(
+                (err.field.as_str(), err.rule),
+                (field, rule),
+                "{f:?}: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn targets_bring_their_candidate_bound() {
+        let mut ranges = BTreeMap::new();
+        ranges.insert(
+            "annulus_mm".into(),
+            TargetRange {
+                min: Some(20.0),
+                max: None,
+            },
+        );
+        let f = CohortFields {
+            resolution: Some(64),
+            targets: Some(ranges),
+            ..fields()
+        };
+        let r = parse(f.clone()).unwrap();
+        assert_eq!(
+            r.targets.as_ref().unwrap().max_candidates,
+            DEFAULT_MAX_CANDIDATES
+        );
+        assert_eq!(r.draws_per_shape(), DEFAULT_MAX_CANDIDATES);
+        let r = parse(CohortFields {
+            max_candidates: Some(7),
+            ..f
+        })
+        .unwrap();
+        assert_eq!(r.targets.unwrap().max_candidates, 7);
+    }
+
+    #[test]
+    fn the_arity_is_checked_against_the_model() {
+        let r = parse(CohortFields {
+            arity: 5,
+            resolution: Some(64),
+            ..fields()
+        })
+        .unwrap();
+        assert!(r.check_model(5).is_ok());
+        let err = r.check_model(4).unwrap_err();
+        assert_eq!((err.field.as_str(), err.rule), ("arity", "range"));
+    }
+}
