@@ -1,11 +1,14 @@
 //! `spawn_app`: the service on port 0 with a temporary database, a registered analytic
 //! model and no background workers; tests run queued jobs themselves.
 
+use std::path::Path;
 use std::sync::{Arc, Once};
 
 use aortagen::config::Config;
+use aortagen::engine::{Engine, SdfEngine};
 use aortagen::http::AppState;
 use aortagen::jobs::{ExecutionOutcome, try_execute_job};
+use aortagen::sdf::backend::Backend;
 use aortagen::startup::{Application, register_model};
 use axum::body::Bytes;
 use axum::http::{HeaderMap, Method, Request, StatusCode};
@@ -32,13 +35,13 @@ pub const MAX_ARCHIVE_ENTRIES: usize = 8;
 pub const MAX_ARCHIVE_BYTES: usize = 256 * 1024;
 
 /// A running test service.
-pub struct TestApp {
+pub struct TestApp<E = AnalyticEngine> {
     /// `http://127.0.0.1:<port>`.
     pub address: String,
     /// Shared state (pool, job context).
     pub state: AppState,
     /// The engine behind the jobs.
-    pub engine: Arc<AnalyticEngine>,
+    pub engine: Arc<E>,
     /// The database URL (to reopen it).
     pub database_url: String,
     client: Client<HttpConnector, Full<Bytes>>,
@@ -121,15 +124,55 @@ pub async fn spawn_on_configured(
     config.max_archive_bytes = MAX_ARCHIVE_BYTES;
     config.models_dir = dir.path().join("models");
     configure(&mut config);
-    let engine = Arc::new(engine);
+    let app = start(Arc::new(engine), dir, url, config).await;
+    let model_dir = app.dir.path().join("models").join(MODEL);
+    register_model(&app.state.pool, app.engine.clone(), MODEL, &model_dir)
+        .await
+        .expect("model registers");
+    app
+}
+
+/// Starts a service on the neural engine with copies of `models` (directory names under
+/// the repository's `models/`) in its models directory; the bundled `default` registers
+/// itself at start. Novelty and pairwise Chamfer use `chamfer_points` samples.
+pub async fn spawn_neural(models: &[&str], chamfer_points: usize) -> TestApp<SdfEngine> {
+    init_tracing();
+    let dir = Arc::new(tempfile::tempdir().expect("temp dir"));
+    for name in models {
+        let from = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("models")
+            .join(name);
+        copy_dir(&from, &dir.path().join("models").join(name));
+    }
+    let url = format!("sqlite://{}", dir.path().join("aortagen.db").display());
+    let mut config = Config::with_database(url.clone(), "127.0.0.1:0");
+    config.models_dir = dir.path().join("models");
+    let engine = SdfEngine::new(Backend::default()).with_chamfer_points(chamfer_points);
+    start(Arc::new(engine), dir, url, config).await
+}
+
+/// Copies the files of a directory (one level: model directories are flat).
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_type().unwrap().is_file() {
+            std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+        }
+    }
+}
+
+/// Builds and serves the application (no workers; tests run jobs themselves).
+async fn start<E: Engine>(
+    engine: Arc<E>,
+    dir: Arc<tempfile::TempDir>,
+    url: String,
+    config: Config,
+) -> TestApp<E> {
     let app = Application::build(config, engine.clone())
         .await
         .expect("app builds");
     let state = app.state().clone();
-    let model_dir = dir.path().join("models").join(MODEL);
-    register_model(&state.pool, engine.clone(), MODEL, &model_dir)
-        .await
-        .expect("model registers");
     let address = format!("http://127.0.0.1:{}", app.port());
     let server = tokio::spawn(app.run_until_stopped(0, std::future::pending()));
     let client = Client::builder(TokioExecutor::new()).build_http();
@@ -144,7 +187,7 @@ pub async fn spawn_on_configured(
     }
 }
 
-impl TestApp {
+impl<E> TestApp<E> {
     /// Sends a request.
     pub async fn request(
         &self,

@@ -13,6 +13,7 @@ mod jobs;
 mod limits;
 mod models;
 mod openapi;
+mod pipeline;
 mod reports;
 mod science;
 mod shapes;
