@@ -134,6 +134,7 @@ await step("a cohort created through the form reaches 100 % without a reload", a
     await page.waitForTimeout(200);
   }
   assert.ok(seen.has("100 %"), `progress seen: ${[...seen].join(", ")}`);
+  assert.ok(seen.size > 1, `the progress never changed on the page: ${[...seen].join(", ")}`);
   assert.equal(await page.evaluate(() => window.__sameDocument), true, "the page was reloaded");
   await page.locator("h1 .badge.succeeded").waitFor({ timeout: 60000 });
   await page.locator("ul.thumbs img").nth(2).waitFor();

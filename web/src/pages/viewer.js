@@ -79,7 +79,7 @@ export async function viewerPage(main, params) {
 
   replace(main,
     h("h1", {}, "Viewer"),
-    cohorts.length ? h("div", { class: "viewer" }, h("div", { class: "side" }, controls, status, legend, info), stage)
+    cohorts.length ? h("div", { class: "viewer" }, h("div", { class: "side" }, controls, status, legend), stage, info)
       : h("p", {}, "No finished cohort yet: ", h("a", { href: "#/new" }, "create one"), "."));
   if (!cohorts.length) return () => {};
 
