@@ -21,6 +21,8 @@ fi
 if [[ ! -d tests/browser/node_modules/playwright-core ]]; then
     (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
 fi
+# The viewer's distance map against brute force (node's own test runner, no packages).
+node --test web/test/
 cargo build --locked --quiet
 binary="$CARGO_TARGET_DIR/debug/aortagen"
 

@@ -59,7 +59,7 @@ export async function cohortsPage(main, params) {
       h("td", { class: "num wide-only" }, `${c.resolution}³`),
       h("td", { class: "num wide-only" }, c.arity),
       h("td", { class: "muted wide-only" }, c.created_at.replace("T", " ").slice(0, 19)),
-      h("td", { class: "actions" }, cohortActions(c, () => load(true), (m) => (message.textContent = m))));
+      h("td", { class: "row-actions" }, cohortActions(c, () => load(true), (m) => (message.textContent = m))));
     rows.set(c.id, { tr, cohort: c });
     return tr;
   }

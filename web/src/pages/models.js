@@ -124,7 +124,7 @@ export async function modelsPage(main) {
     const live = id && lives.get(decodeURIComponent(id));
     if (!live) return;
     if (job.status === "running" || job.status === "queued") {
-      replace(live, h("p", {}, `Training (${job.status}): epochs`), progressBar(job.progress.done, job.progress.total, `training ${id}`));
+      replace(live, h("p", {}, `Training ${job.status}, epochs done:`), progressBar(job.progress.done, job.progress.total, `training ${id}`));
     } else load();
   };
   return onJob(show);
