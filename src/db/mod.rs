@@ -5,10 +5,12 @@
 pub mod anchors;
 pub mod cohort_metrics;
 pub mod cohorts;
+pub mod job_changes;
 pub mod jobs;
 pub mod models;
 pub mod shapes;
 pub mod states;
+pub mod thumbnails;
 
 use std::str::FromStr;
 use std::sync::Arc;

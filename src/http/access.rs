@@ -1,6 +1,7 @@
 //! Access control by API key. With no key configured the API is open. With keys, every
 //! state-changing request (POST, PUT, PATCH, DELETE) needs `Authorization: Bearer <key>`,
-//! and reads too when `protect_reads` is set; the probes and `/metrics` stay public.
+//! and reads too when `protect_reads` is set; the probes, `/metrics` and the dashboard's page
+//! and assets (which hold no data) stay public.
 //!
 //! Only SHA-256 digests of the keys are kept. A presented key is hashed and compared with
 //! every configured digest in constant time, without stopping at a match, so the response
@@ -89,9 +90,15 @@ impl AccessPolicy {
         !self.digests.is_empty()
     }
 
+    /// Whether reads need a key too.
+    pub fn protects_reads(&self) -> bool {
+        self.protect_reads
+    }
+
     /// Decides on a request from its method, path and `Authorization` header.
     pub fn decide(&self, method: &Method, path: &str, authorization: Option<&[u8]>) -> Decision {
-        if !self.is_enabled() || PUBLIC_PATHS.contains(&path) {
+        let public = PUBLIC_PATHS.contains(&path) || super::dashboard::is_public(path);
+        if !self.is_enabled() || public {
             return Decision::Allow;
         }
         let writes = matches!(

@@ -4,7 +4,10 @@
 pub mod access;
 pub mod anchors;
 pub mod cohorts;
+pub mod cross_site;
+pub mod dashboard;
 pub mod error;
+pub mod events;
 pub mod extractors;
 pub mod health;
 pub mod jobs;
@@ -16,6 +19,7 @@ pub mod models;
 pub mod openapi;
 pub mod reports;
 pub mod shapes;
+pub mod thumbnails;
 pub mod upload_archive;
 
 use std::sync::Arc;
@@ -69,11 +73,15 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(shapes::router())
         .merge(jobs::router())
         .merge(reports::router())
+        .merge(thumbnails::router())
+        .merge(events::router())
+        .merge(dashboard::router())
 }
 
 /// The complete application: routes, fallbacks, limits, access control, tracing and
 /// metrics. From the outside in: tracing, metrics (so refused and timed-out requests are
-/// counted), the in-flight bound, the deadline, the key check, body limits, the handler.
+/// counted), the in-flight bound, the deadline, the cross-site check, the key check, body
+/// limits, the handler.
 pub fn router(state: AppState) -> Router {
     let (routes, _) = api_router().split_for_parts();
     let limit = state.config.max_upload_bytes;
@@ -86,6 +94,7 @@ pub fn router(state: AppState) -> Router {
             state.access.clone(),
             access::require_key,
         ))
+        .layer(middleware::from_fn(cross_site::refuse_cross_site_writes))
         .layer(middleware::from_fn_with_state(
             limits.clone(),
             limits::deadline,

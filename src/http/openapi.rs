@@ -78,7 +78,8 @@ impl Modify for AccessDocs {
                 .build()
         };
         for (path, item) in doc.paths.paths.iter_mut() {
-            if super::access::PUBLIC_PATHS.contains(&path.as_str()) {
+            let path = path.as_str();
+            if super::access::PUBLIC_PATHS.contains(&path) || super::dashboard::is_public(path) {
                 continue;
             }
             let reads = [&mut item.get, &mut item.head, &mut item.options];
@@ -109,7 +110,10 @@ impl Modify for AccessDocs {
                 let r = &mut op.responses.responses;
                 let unauthorized = problem("No API key (when keys are configured)");
                 r.entry("401".into()).or_insert(unauthorized.into());
-                let forbidden = problem("Not a valid API key");
+                let forbidden = problem(
+                    "Not a valid API key, or a cross-site request (`Origin` or `Sec-Fetch-Site` of \
+                     another site, or a form `Content-Type` the operation does not take)",
+                );
                 r.entry("403".into()).or_insert(forbidden.into());
                 let timeout = problem("The request took longer than the configured timeout");
                 r.entry("408".into()).or_insert(timeout.into());

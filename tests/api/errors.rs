@@ -165,8 +165,18 @@ fn cases() -> Vec<Case> {
         ),
         post("malformed JSON", "{\n  \"count\": 1,,\n}", 400, None, None),
         Case {
-            content_type: "text/plain",
+            content_type: "application/xml",
             ..post("wrong content type", "{}", 415, None, None)
+        },
+        Case {
+            content_type: "text/plain",
+            ..post(
+                "form content type",
+                "{}",
+                403,
+                Some("Content-Type"),
+                Some("same-origin"),
+            )
         },
         Case {
             content_type: "",

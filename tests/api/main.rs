@@ -5,6 +5,8 @@ mod access;
 mod cohorts;
 mod conditioned;
 mod conformance;
+mod cross_site;
+mod dashboard;
 mod engine;
 mod errors;
 mod fit;
