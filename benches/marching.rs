@@ -19,7 +19,7 @@
 use aortagen::extract::analytic::Shape;
 use aortagen::extract::{ExtractOptions, Extraction, ScalarField, extract_dense, extract_surface};
 use aortagen::geometry::marching_cubes::{Grid, marching_cubes};
-use aortagen::sdf::reconstruct::NeuralField;
+use aortagen::sdf::inference::reconstruct::NeuralField;
 use aortagen::sdf::store::LoadedModel;
 use aortagen::sdf::{Backend, SdfField, SdfNetworkConfig};
 use std::time::{Duration, Instant};

@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use aortagen::sdf::backend::Backend;
-use aortagen::sdf::mixing::Mixture;
-use aortagen::sdf::reconstruct::{ExtractionMethod, reconstruct};
+use aortagen::sdf::inference::mixing::Mixture;
+use aortagen::sdf::inference::reconstruct::{ExtractionMethod, reconstruct};
 use aortagen::sdf::store::LoadedModel;
 
 fn bundled() -> LoadedModel {

@@ -7,13 +7,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use aortagen::geometry::normalize::normalize_to_unit_ball;
 use aortagen::sdf::backend::Backend;
 use aortagen::sdf::data::{DataSource, PreparedDataset, load_source_meshes, prepare_shapes};
-use aortagen::sdf::evaluation::EvaluationSettings;
-use aortagen::sdf::fit::{
+use aortagen::sdf::inference::evaluation::EvaluationSettings;
+use aortagen::sdf::inference::reconstruct::ExtractionMethod;
+use aortagen::sdf::model::network::SdfNetwork;
+use aortagen::sdf::store::LoadedModel;
+use aortagen::sdf::training::fit::{
     FitError, FitSettings, fit_mesh, frozen_trainable_copy, latent_chamfer, optimise_latent,
 };
-use aortagen::sdf::network::SdfNetwork;
-use aortagen::sdf::reconstruct::ExtractionMethod;
-use aortagen::sdf::store::LoadedModel;
 use aortagen::sdf::training::{Preset, Silent, TrainingRequest, train};
 
 const SHAPES: usize = 3;

@@ -9,7 +9,7 @@ use aortagen::cohort::{Selection, Weighting};
 use aortagen::formats::MeshFormat;
 use aortagen::formats::{MeshMetadata, write_mesh_file};
 use aortagen::sdf::backend::Backend;
-use aortagen::sdf::reconstruct::ExtractionMethod;
+use aortagen::sdf::inference::reconstruct::ExtractionMethod;
 use aortagen::synth::generate_root;
 
 fn args(out: &Path) -> ReportArgs {

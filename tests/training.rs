@@ -7,9 +7,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use aortagen::geometry::normalize::normalize_to_unit_ball;
 use aortagen::sdf::backend::Backend;
 use aortagen::sdf::data::{DataSource, load_source_meshes};
-use aortagen::sdf::decoder::SdfAutoDecoder;
-use aortagen::sdf::evaluation::{EvaluationSettings, evaluate_model};
-use aortagen::sdf::reconstruct::ExtractionMethod;
+use aortagen::sdf::inference::evaluation::{EvaluationSettings, evaluate_model};
+use aortagen::sdf::inference::reconstruct::ExtractionMethod;
+use aortagen::sdf::model::decoder::SdfAutoDecoder;
 use aortagen::sdf::store::{LoadedModel, ModelLoadError};
 use aortagen::sdf::training::{
     Preset, Silent, StepReport, TrainingObserver, TrainingOutcome, TrainingRequest, TrainingSetup,
@@ -414,7 +414,7 @@ mod cohort {
         CohortFields, CohortPlan, CohortRequest, RequestError, RequestLimits, Weighting,
     };
     use aortagen::engine::{Engine, SdfEngine};
-    use aortagen::sdf::mixing::Mixture;
+    use aortagen::sdf::inference::mixing::Mixture;
 
     /// A request of `arity` shapes with equal weights unless `weights` are given, checked
     /// against a model of [`SHAPES`] training shapes.
@@ -623,8 +623,8 @@ mod cohort {
 
     #[test]
     fn generate_mixes_a_fitted_anchor_in_the_last_place_of_every_shape() {
-        use aortagen::sdf::anchors::{Anchor, AnchorSet};
-        use aortagen::sdf::reconstruct::reconstruct;
+        use aortagen::sdf::inference::reconstruct::reconstruct;
+        use aortagen::sdf::store::anchors::{Anchor, AnchorSet};
         let dir = tempfile::tempdir().unwrap();
         train_tiny(dir.path(), 2);
         let model = load(dir.path());

@@ -19,9 +19,9 @@ use crate::report::sections::{CD_LABEL, upper_triangle};
 use crate::report::{Report, Section, footer, render_html};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::read_mesh_directory;
-use crate::sdf::evaluation::{CHAMFER_UNITS, quantile};
-use crate::sdf::novelty::training_surfaces;
-use crate::sdf::reconstruct::ExtractionMethod;
+use crate::sdf::inference::evaluation::{CHAMFER_UNITS, quantile};
+use crate::sdf::inference::novelty::training_surfaces;
+use crate::sdf::inference::reconstruct::ExtractionMethod;
 use crate::sdf::store::LoadedModel;
 
 /// Compare cohorts written by `aortagen generate` (each in its own directory).

@@ -11,9 +11,11 @@ use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
 use crate::render::{View, encode_png, render_meshes};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::{DataSource, load_source_meshes};
-use crate::sdf::evaluation::{CHAMFER_UNITS, EvaluationReport, EvaluationSettings, evaluate_model};
-use crate::sdf::reconstruct::{DEFAULT_RESOLUTION, reconstruct};
-use crate::sdf::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
+use crate::sdf::inference::evaluation::{
+    CHAMFER_UNITS, EvaluationReport, EvaluationSettings, evaluate_model,
+};
+use crate::sdf::inference::reconstruct::{EVALUATION_RESOLUTION, reconstruct};
+use crate::sdf::inference::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
 use crate::sdf::store::LoadedModel;
 
 /// Reconstruct each training shape from its latent and compare it with the original.
@@ -26,7 +28,7 @@ pub struct EvaluateArgs {
     #[arg(long)]
     pub data: Option<PathBuf>,
     /// Grid samples per axis over [-1,1]³.
-    #[arg(long, default_value_t = DEFAULT_RESOLUTION)]
+    #[arg(long, default_value_t = EVALUATION_RESOLUTION)]
     pub resolution: usize,
     /// Points sampled on each surface for the Chamfer distance.
     #[arg(long, default_value_t = DEFAULT_CHAMFER_POINTS)]

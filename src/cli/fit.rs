@@ -10,12 +10,12 @@ use anyhow::Context;
 
 use super::progress::{init_logging, terminal_bar};
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
-use crate::sdf::anchors::{ANCHORS_FILE, Anchor, AnchorSet};
 use crate::sdf::backend::Backend;
-use crate::sdf::evaluation::CHAMFER_UNITS;
-use crate::sdf::fit::{DEFAULT_FIT_ITERATIONS, FitSettings, fit_mesh};
-use crate::sdf::reconstruct::DEFAULT_RESOLUTION;
+use crate::sdf::inference::evaluation::CHAMFER_UNITS;
+use crate::sdf::inference::reconstruct::EVALUATION_RESOLUTION;
 use crate::sdf::store::LoadedModel;
+use crate::sdf::store::anchors::{ANCHORS_FILE, Anchor, AnchorSet};
+use crate::sdf::training::fit::{DEFAULT_FIT_ITERATIONS, FitSettings, fit_mesh};
 
 /// Fit a latent code to a new mesh with the network frozen; store it as an anchor.
 #[derive(Debug, clap::Args)]
@@ -39,7 +39,7 @@ pub struct FitArgs {
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Grid samples per axis for the reconstruction that is scored.
-    #[arg(long, default_value_t = DEFAULT_RESOLUTION)]
+    #[arg(long, default_value_t = EVALUATION_RESOLUTION)]
     pub resolution: usize,
     /// Points sampled on each surface for the Chamfer distance.
     #[arg(long, default_value_t = DEFAULT_CHAMFER_POINTS)]

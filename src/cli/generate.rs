@@ -20,9 +20,9 @@ use crate::cohort::{
 use crate::engine::{AnchorLatent, Engine, SdfEngine};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
-use crate::sdf::anchors::AnchorSet;
 use crate::sdf::backend::Backend;
-use crate::sdf::reconstruct::ExtractionMethod;
+use crate::sdf::inference::reconstruct::ExtractionMethod;
+use crate::sdf::store::anchors::AnchorSet;
 use crate::sdf::store::read_manifest;
 
 /// Coordinates of the written meshes.

@@ -13,7 +13,7 @@ use crate::geometry::normalize::normalize_to_unit_ball;
 use crate::geometry::sampling::sample_surface;
 use crate::report::{Report, Section, footer, render_html, sections};
 use crate::sdf::data::read_mesh_directory;
-use crate::sdf::evaluation::EvaluationReport;
+use crate::sdf::inference::evaluation::EvaluationReport;
 
 /// Write an HTML report of a model (`--model`) or of a directory of meshes (`--meshes`).
 #[derive(Debug, clap::Args)]

@@ -9,7 +9,7 @@ use indicatif::ProgressBar;
 use super::progress::{init_logging, terminal_bar};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::DataSource;
-use crate::sdf::manifest::EpochLoss;
+use crate::sdf::store::manifest::EpochLoss;
 use crate::sdf::training::{
     Preset, StepReport, TrainingObserver, TrainingRequest, TrainingSetup, train,
 };

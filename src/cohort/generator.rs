@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::Context;
 
 use super::plan::CohortPlan;
-use super::record::{AnchorShare, ShapeProvenance};
+use super::record::{AnchorShare, CohortShape, ShapeProvenance};
 use super::request::{CohortRequest, TargetSearch};
 use super::seeds::SEED_SCHEME;
 use super::targets::feasibility::{
@@ -23,7 +23,7 @@ use super::targets::search::{
 use super::{CohortError, MAX_REDRAWS, Targets};
 use crate::anatomy::shape::ShapeAnatomy;
 use crate::engine::{Engine, GeneratedShape, ShapeSpec, panic_message};
-use crate::sdf::novelty::{Novelty, NoveltyReference};
+use crate::sdf::inference::novelty::{Novelty, NoveltyReference};
 
 /// What a cohort needs before its first shape: the training surfaces to measure novelty
 /// against and, for targeted cohorts, the training shapes' measurements.
@@ -60,29 +60,6 @@ impl CohortSetup {
             training,
         })
     }
-}
-
-/// One finished shape of a cohort.
-#[derive(Debug, Clone)]
-pub struct CohortShape {
-    /// Its position in the cohort.
-    pub index: u64,
-    /// The kept draw's specification.
-    pub spec: ShapeSpec,
-    /// The engine's mesh (unit ball) with its transform to mesh units.
-    pub shape: GeneratedShape,
-    /// Distance to the nearest training shape.
-    pub novelty: Novelty,
-    /// Draws rejected as closer than the minimum novelty.
-    pub redraws: u32,
-    /// Whether the minimum novelty is met (true without one).
-    pub novelty_met: bool,
-    /// Its measurements in mm, or why they failed.
-    pub anatomy: Result<ShapeAnatomy, String>,
-    /// Weight refinements among its candidates (targeted cohorts).
-    pub refinements: Option<u32>,
-    /// Where it comes from.
-    pub provenance: ShapeProvenance,
 }
 
 /// What a targeted shape's candidate search did.

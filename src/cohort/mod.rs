@@ -21,9 +21,9 @@ pub mod weights;
 
 use std::ops::RangeInclusive;
 
-pub use generator::{CohortGenerator, CohortSetup, CohortShape, EngineHandle};
+pub use generator::{CohortGenerator, CohortSetup, EngineHandle};
 pub use plan::CohortPlan;
-pub use record::{AnchorShare, ShapeProvenance, ShapeRecord};
+pub use record::{AnchorShare, CohortShape, ShapeProvenance, ShapeRecord};
 pub use request::{CohortFields, CohortRequest, RequestError, RequestLimits, TargetSearch};
 pub use selection::Selection;
 pub use targets::Targets;

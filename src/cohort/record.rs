@@ -6,12 +6,35 @@
 use serde::{Deserialize, Serialize};
 
 use super::Selection;
-use super::generator::CohortShape;
 use crate::anatomy::shape::ShapeAnatomy;
+use crate::engine::{GeneratedShape, ShapeSpec};
 use crate::formats::mesh_blob;
 use crate::geometry::normalize::UnitBallTransform;
-use crate::sdf::manifest::SIGN_CONVENTION;
-use crate::sdf::novelty::Novelty;
+use crate::sdf::inference::novelty::Novelty;
+use crate::sdf::store::manifest::SIGN_CONVENTION;
+
+/// One finished shape of a cohort.
+#[derive(Debug, Clone)]
+pub struct CohortShape {
+    /// Its position in the cohort.
+    pub index: u64,
+    /// The kept draw's specification.
+    pub spec: ShapeSpec,
+    /// The engine's mesh (unit ball) with its transform to mesh units.
+    pub shape: GeneratedShape,
+    /// Distance to the nearest training shape.
+    pub novelty: Novelty,
+    /// Draws rejected as closer than the minimum novelty.
+    pub redraws: u32,
+    /// Whether the minimum novelty is met (true without one).
+    pub novelty_met: bool,
+    /// Its measurements in mm, or why they failed.
+    pub anatomy: Result<ShapeAnatomy, String>,
+    /// Weight refinements among its candidates (targeted cohorts).
+    pub refinements: Option<u32>,
+    /// Where it comes from.
+    pub provenance: ShapeProvenance,
+}
 
 /// Where a generated shape comes from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]

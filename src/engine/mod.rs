@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::geometry::TriMesh;
 use crate::geometry::normalize::UnitBallTransform;
-use crate::sdf::novelty::NoveltyReference;
+use crate::sdf::inference::novelty::NoveltyReference;
 
 /// Facts about a registered model, reported by the engine and stored as its manifest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

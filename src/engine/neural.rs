@@ -18,15 +18,15 @@ use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
 use crate::geometry::sampling::sample_surface;
 use crate::sdf::backend::Backend;
-use crate::sdf::config::Preset;
 use crate::sdf::data::DataSource;
-use crate::sdf::evaluation::EvaluationReport;
-use crate::sdf::fit::{FitSettings, fit_mesh};
-use crate::sdf::manifest::MANIFEST_FILE;
-use crate::sdf::mixing::{AnchorPart, Mixture, anchored_latent};
-use crate::sdf::novelty::{NoveltyReference, training_surfaces};
-use crate::sdf::reconstruct::{ExtractionMethod, reconstruct};
+use crate::sdf::inference::evaluation::EvaluationReport;
+use crate::sdf::inference::mixing::{AnchorPart, Mixture, anchored_latent};
+use crate::sdf::inference::novelty::{NoveltyReference, training_surfaces};
+use crate::sdf::inference::reconstruct::{ExtractionMethod, reconstruct};
 use crate::sdf::store::LoadedModel;
+use crate::sdf::store::manifest::MANIFEST_FILE;
+use crate::sdf::training::config::Preset;
+use crate::sdf::training::fit::{FitSettings, fit_mesh};
 use crate::sdf::training::{TrainingObserver, TrainingRequest, train};
 
 /// File in a model directory holding `aortagen evaluate --json` output; when present, its

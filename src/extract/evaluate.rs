@@ -79,7 +79,7 @@ impl<'a> Evaluator<'a> {
         self.time += start.elapsed();
         grads
             .into_iter()
-            .map(crate::geometry::mc_dense::unit)
+            .map(crate::geometry::marching_cubes::dense::unit)
             .collect()
     }
 }

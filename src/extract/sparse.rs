@@ -6,10 +6,10 @@ use super::evaluate::{Evaluator, finish};
 use super::samples::{Layout, Probe, SampleCache};
 use super::{Evaluations, ExtractError, ExtractOptions, Extraction, ScalarField, Timings};
 use crate::geometry::TriMesh;
-use crate::geometry::mc_cell::{
+use crate::geometry::marching_cubes::cell::{
     case_of, centre_position, decisions, edge_position, slot_corners, slot_edge, triangles,
 };
-use crate::geometry::mc_tables::CENTRE_SLOT;
+use crate::geometry::marching_cubes::tables::CENTRE_SLOT;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -200,7 +200,9 @@ fn polygonise_block(layout: &Layout, block: [u32; 3], lattice: &[f32], iso: f32)
                     let t = tri.map(|slot| {
                         if slot == CENTRE_SLOT {
                             if centre == u32::MAX {
-                                let polygon = crate::geometry::mc_cell::centre_polygon(case, dec);
+                                let polygon = crate::geometry::marching_cubes::cell::centre_polygon(
+                                    case, dec,
+                                );
                                 let p =
                                     centre_position(&layout.coords, cell, &values, iso, polygon);
                                 let key = 3 * r * r * r

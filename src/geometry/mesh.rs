@@ -151,7 +151,7 @@ impl TriMesh {
         Ok(())
     }
 
-    /// The cube [0,1]³ as 8 shared vertices and 12 outward triangles: the smallest closed,
+    /// The cube `[0,1]³` as 8 shared vertices and 12 outward triangles: the smallest closed,
     /// oriented mesh with exactly known area (6) and volume (1), for checks and examples.
     pub fn unit_cube() -> Self {
         let positions = (0..8)

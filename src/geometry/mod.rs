@@ -3,9 +3,6 @@
 
 pub mod chamfer;
 pub mod marching_cubes;
-pub(crate) mod mc_cell;
-pub(crate) mod mc_dense;
-pub(crate) mod mc_tables;
 pub mod mesh;
 pub mod normalize;
 pub mod point_tree;

@@ -22,7 +22,7 @@ use crate::db::{self, anchors::AnchorRow};
 use crate::engine::FitSpec;
 use crate::jobs::Job;
 use crate::jobs::fit::FitPayload;
-use crate::sdf::fit::{DEFAULT_FIT_ITERATIONS, MAX_FIT_ITERATIONS};
+use crate::sdf::training::fit::{DEFAULT_FIT_ITERATIONS, MAX_FIT_ITERATIONS};
 
 /// Accepted fit upload (documentation of the multipart form).
 #[derive(Debug, utoipa::ToSchema)]

@@ -21,7 +21,7 @@ use crate::formats::{MeshFormat, read_mesh_bytes};
 use crate::geometry::TriMesh;
 use crate::jobs::Job;
 use crate::jobs::training::TrainingPayload;
-use crate::sdf::config::Preset;
+use crate::sdf::training::config::Preset;
 
 /// Most epochs a training request may ask for (the paper preset's count).
 const MAX_EPOCHS: u64 = 5000;

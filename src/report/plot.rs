@@ -181,7 +181,7 @@ fn draw_overlay(
             path.push((edges[i + 1], f));
         }
         path.push((edges[edges.len() - 1], 0.0));
-        let median = crate::sdf::evaluation::quantile(values, 0.5);
+        let median = crate::sdf::inference::evaluation::quantile(values, 0.5);
         chart
             .draw_series(std::iter::once(PathElement::new(
                 path,

@@ -4,7 +4,7 @@
 
 use super::html::Section;
 use super::plot::{HistogramPlot, Marker, histogram_svg, tick};
-use crate::sdf::evaluation::{CHAMFER_UNITS, quantile};
+use crate::sdf::inference::evaluation::{CHAMFER_UNITS, quantile};
 
 /// Chamfer distances as every report labels them.
 pub const CD_LABEL: &str = "Chamfer distance (unit ball, squared)";

@@ -16,8 +16,8 @@ use aortagen::geometry::TriMesh;
 use aortagen::geometry::chamfer::chamfer_distance;
 use aortagen::geometry::normalize::UnitBallTransform;
 use aortagen::geometry::normalize::normalize_to_unit_ball;
-use aortagen::sdf::mixing::{Mixture, noisy_latent};
-use aortagen::sdf::novelty::NoveltyReference;
+use aortagen::sdf::inference::mixing::{Mixture, noisy_latent};
+use aortagen::sdf::inference::novelty::NoveltyReference;
 
 /// Number of training ellipsoids.
 pub const TRAINING_SHAPES: usize = 5;

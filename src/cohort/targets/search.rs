@@ -67,7 +67,7 @@ pub struct SearchOutcome<C> {
     pub attempt: u32,
     /// Candidates drawn and measured (coarse or final), at least 1.
     pub candidates: u32,
-    /// How many of them were weight refinements of the one before ([`refine_weights`]).
+    /// How many of them were weight refinements of the one before ([`super::refine::refine_weights`]).
     pub refined: u32,
     /// Whether the kept candidate meets every target (at the final resolution).
     pub met: bool,
