@@ -8,5 +8,5 @@ export AORTAGEN_CRASH_ROUNDS="${AORTAGEN_CRASH_ROUNDS:-20}"
 profile=()
 if [[ "${RELEASE:-0}" == 1 ]]; then profile=(--release); fi
 start=$(date +%s)
-cargo test --locked "${profile[@]}" --test crash_safety -- --nocapture
+cargo test --locked "${profile[@]}" --test api crash_safety -- --nocapture
 echo "crash safety: ${AORTAGEN_CRASH_ROUNDS} rounds passed in $(( $(date +%s) - start )) s (build included)"

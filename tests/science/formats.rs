@@ -9,7 +9,7 @@ use aortagen::formats::{
 };
 use aortagen::geometry::TriMesh;
 
-#[path = "formats/malformed.rs"]
+#[path = "malformed.rs"]
 mod malformed;
 
 /// Unit cube, outward triangles, 8 shared vertices.

@@ -2,14 +2,11 @@
 //! running job back in the queue with its finished shapes, and exits 0 within 10 s; after a
 //! restart the cohort completes with exactly its count of shapes.
 
-#[path = "crash/server.rs"]
-mod server;
-
 use std::time::{Duration, Instant};
 
 use serde_json::json;
 
-use server::ServiceDir;
+use crate::process::ServiceDir;
 
 #[test]
 fn sigterm_mid_cohort_exits_cleanly_and_the_cohort_resumes() {
@@ -43,7 +40,7 @@ fn sigterm_mid_cohort_exits_cleanly_and_the_cohort_resumes() {
     assert!(status.success(), "exit status {status}:\n{log}");
     assert!(took < Duration::from_secs(10), "{took:?}");
 
-    let done_at_stop = server::with_database(&dir.database(), async move |pool| {
+    let done_at_stop = crate::process::with_database(&dir.database(), async move |pool| {
         let (status, done): (String, i64) =
             sqlx::query_as("select status, progress_done from job where job_id = ?")
                 .bind(job)
@@ -115,7 +112,7 @@ fn sigterm_during_a_long_shape_exits_within_the_grace_period() {
         log.contains("did not stop within the shutdown grace period"),
         "the shape was abandoned:\n{log}"
     );
-    let status = server::with_database(&dir.database(), async move |pool| {
+    let status = crate::process::with_database(&dir.database(), async move |pool| {
         sqlx::query_scalar::<_, String>("select status from job where job_id = ?")
             .bind(job)
             .fetch_one(pool)

@@ -3,9 +3,6 @@
 //! on the same file. Afterwards every job must have succeeded with nothing lost, duplicated
 //! or half-written. Rounds: `AORTAGEN_CRASH_ROUNDS` (default 3); seed: `AORTAGEN_CRASH_SEED`.
 
-#[path = "crash/server.rs"]
-mod server;
-
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
@@ -14,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use serde_json::{Value, json};
 use sha2::{Digest, Sha256};
 
-use server::{Server, ServiceDir, ellipsoid_obj, multipart, with_database};
+use crate::process::{Server, ServiceDir, ellipsoid_obj, multipart, with_database};
 
 /// Worker tasks of the service under test.
 const WORKERS: usize = 2;

@@ -9,7 +9,7 @@ use aortagen::synth::{
     AorticRootParams, SurfaceResolution, build_root, build_root_with, generate_root, generate_roots,
 };
 
-use super::intersect::self_intersections;
+use crate::synth_intersect::self_intersections;
 
 /// Points where the mesh crosses the plane z = z0.
 fn slice_z(mesh: &TriMesh, z0: f64) -> Vec<[f64; 3]> {
