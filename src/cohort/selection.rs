@@ -131,21 +131,8 @@ fn draw_weighted(rng: &mut ChaCha8Rng, weights: &[f64], eligible: &[bool]) -> us
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sdf::inference::mixing::test_support::clustered_latents;
     use rand::SeedableRng;
-
-    /// 20 latents in 4 dimensions: a tight cluster of 16 around the origin and 4 outliers.
-    fn clustered_latents() -> Vec<Vec<f32>> {
-        let mut rng = ChaCha8Rng::seed_from_u64(5);
-        let mut latents: Vec<Vec<f32>> = (0..16)
-            .map(|_| (0..4).map(|_| rng.random::<f32>() * 0.1).collect())
-            .collect();
-        for d in 0..4 {
-            let mut z = vec![0.0; 4];
-            z[d] = 3.0;
-            latents.push(z);
-        }
-        latents
-    }
 
     fn distance(a: &[f32], b: &[f32]) -> f64 {
         a.iter()

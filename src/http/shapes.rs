@@ -341,7 +341,8 @@ fn content_type(format: MeshFormat) -> &'static str {
     }
 }
 
-fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
+/// Whether `If-None-Match` names `etag` (or `*`).
+pub(super) fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
     headers
         .get_all(header::IF_NONE_MATCH)
         .iter()

@@ -54,7 +54,7 @@ async fn get_shape_thumbnail(
             "public, max-age=31536000, immutable".to_owned(),
         ),
     ];
-    if matches_etag(&headers, &etag) {
+    if super::shapes::if_none_match(&headers, &etag) {
         return Ok((StatusCode::NOT_MODIFIED, cache).into_response());
     }
     let sha = shape.mesh_sha256.as_str();
@@ -98,13 +98,4 @@ async fn render_thumbnail(state: &AppState, shape_id: i64) -> Result<Vec<u8>> {
     .await
     .map_err(anyhow::Error::from)??;
     Ok(png)
-}
-
-fn matches_etag(headers: &HeaderMap, etag: &str) -> bool {
-    headers
-        .get_all(header::IF_NONE_MATCH)
-        .iter()
-        .filter_map(|v| v.to_str().ok())
-        .flat_map(|v| v.split(','))
-        .any(|t| t.trim() == etag || t.trim() == "*")
 }

@@ -157,14 +157,14 @@ pub fn anchored_latent(
     Ok((UnitBallTransform::blend(&parts)?, latent))
 }
 
+/// Latent sets for the tests of mixing and of latent selection.
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::SeedableRng;
+pub(crate) mod test_support {
+    use rand::{RngExt, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
     /// 20 latents in 4 dimensions: a tight cluster of 16 around the origin and 4 outliers.
-    fn clustered_latents() -> Vec<Vec<f32>> {
+    pub(crate) fn clustered_latents() -> Vec<Vec<f32>> {
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         let mut latents: Vec<Vec<f32>> = (0..16)
             .map(|_| (0..4).map(|_| rng.random::<f32>() * 0.1).collect())
@@ -176,6 +176,12 @@ mod tests {
         }
         latents
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_support::clustered_latents;
+    use super::*;
 
     fn mixture() -> Mixture {
         Mixture {
