@@ -93,6 +93,7 @@ impl Application {
             queue,
             access: Arc::new(access),
             read_only_switch,
+            readiness: Default::default(),
         };
         Ok(Self {
             listener,

@@ -60,6 +60,8 @@ pub struct AppState {
     pub read_only_switch: ReadOnlySwitch,
     /// Encoded mesh downloads.
     pub mesh_cache: Arc<mesh_cache::MeshCache>,
+    /// The readiness probe's write, shared by concurrent `/readyz` calls.
+    pub readiness: Arc<health::ReadinessProbe>,
 }
 
 /// Every documented route, with its OpenAPI description.

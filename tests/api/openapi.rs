@@ -90,3 +90,44 @@ async fn health_readiness_and_metrics_answer() {
     app.state.jobs.controls.shut_down();
     assert_eq!(app.get("/readyz").await.status.as_u16(), 503);
 }
+
+/// Reads a counter's value from the Prometheus text.
+fn counter(text: &str, name: &str) -> u64 {
+    text.lines()
+        .find_map(|l| l.strip_prefix(&format!("{name} ")))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{name} missing in {text}"))
+}
+
+#[tokio::test]
+async fn concurrent_readiness_checks_share_their_database_writes() {
+    let app = spawn_app().await;
+    let calls = 64;
+    let answers = futures_util::future::join_all((0..calls).map(|_| app.get("/readyz"))).await;
+    assert!(answers.iter().all(|r| r.status.as_u16() == 200));
+    let text = String::from_utf8(app.get("/metrics").await.body.to_vec()).unwrap();
+    let writes = counter(&text, "aortagen_readiness_probes_total");
+    assert!(
+        writes >= 1 && writes < calls,
+        "{writes} writes for {calls} checks"
+    );
+    // Sequential checks each make their own write, so a fault shows at the next call.
+    app.get("/readyz").await;
+    let text = String::from_utf8(app.get("/metrics").await.body.to_vec()).unwrap();
+    assert_eq!(
+        counter(&text, "aortagen_readiness_probes_total"),
+        writes + 1
+    );
+}
+
+#[tokio::test]
+async fn made_up_request_methods_do_not_create_metric_series() {
+    let app = spawn_app().await;
+    for i in 0..20 {
+        let method = axum::http::Method::from_bytes(format!("BREW{i}").as_bytes()).unwrap();
+        app.request(method, "/v1/cohorts", &[], "").await;
+    }
+    let text = String::from_utf8(app.get("/metrics").await.body.to_vec()).unwrap();
+    assert!(!text.contains("BREW"), "{text}");
+    assert!(text.contains("method=\"other\""), "{text}");
+}
