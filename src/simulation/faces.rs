@@ -6,7 +6,13 @@ use std::collections::HashMap;
 
 use serde::{Deserialize, Serialize};
 
+use super::extension::EXTENSION_BASE;
 use super::opening::WALL_ID;
+
+/// Whether face `id` is the cap of an opening (not the wall or a flow-extension wall).
+pub fn is_cap(id: u32) -> bool {
+    id != WALL_ID && id < EXTENSION_BASE
+}
 use crate::geometry::TriMesh;
 use crate::geometry::mesh::{cross, norm, normalized, sub};
 
@@ -63,14 +69,15 @@ impl LabelledMesh {
 
     /// The triangles of one face as their own mesh (shared vertices kept, others dropped).
     pub fn submesh(&self, id: u32) -> TriMesh {
-        let picked: Vec<[u32; 3]> = self
-            .mesh
-            .triangles
-            .iter()
-            .zip(&self.face_ids)
-            .filter(|&(_, &f)| f == id)
-            .map(|(t, _)| *t)
+        let picked: Vec<usize> = (0..self.face_ids.len())
+            .filter(|&t| self.face_ids[t] == id)
             .collect();
+        self.submesh_of(&picked)
+    }
+
+    /// The given triangles as their own mesh, in their order.
+    fn submesh_of(&self, triangles: &[usize]) -> TriMesh {
+        let picked = triangles.iter().map(|&t| self.mesh.triangles[t]);
         let mut map: HashMap<u32, u32> = HashMap::new();
         let mut out = TriMesh::default();
         let normals = self.mesh.normals.as_ref();
@@ -90,16 +97,25 @@ impl LabelledMesh {
         out
     }
 
-    /// The open variant: the wall alone, with a boundary loop at every opening.
+    /// The open variant: the wall (and any flow-extension walls) without the caps, with a
+    /// boundary loop at every opening.
     pub fn wall_only(&self) -> LabelledMesh {
-        let wall = self.submesh(WALL_ID);
+        let keep: Vec<u32> = self
+            .faces
+            .iter()
+            .map(|f| f.id)
+            .filter(|&id| !is_cap(id))
+            .collect();
+        let picked: Vec<usize> = (0..self.face_ids.len())
+            .filter(|&t| keep.contains(&self.face_ids[t]))
+            .collect();
         LabelledMesh {
-            face_ids: vec![WALL_ID; wall.triangles.len()],
-            mesh: wall,
+            mesh: self.submesh_of(&picked),
+            face_ids: picked.iter().map(|&t| self.face_ids[t]).collect(),
             faces: self
                 .faces
                 .iter()
-                .filter(|f| f.id == WALL_ID)
+                .filter(|f| keep.contains(&f.id))
                 .cloned()
                 .collect(),
         }

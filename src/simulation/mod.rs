@@ -20,6 +20,7 @@
 pub mod cap;
 pub mod cut;
 mod error;
+pub mod export;
 pub mod extension;
 pub mod faces;
 pub mod intersect;
@@ -36,6 +37,7 @@ pub mod tree_openings;
 pub mod vessel_tree;
 
 pub use error::SimulationError;
+pub use export::{SimulationFormat, Variant, encode, sidecar, write_all};
 pub use faces::{FaceData, FaceName, LabelledMesh};
 pub use opening::{FIRST_OUTLET_ID, INLET_ID, Opening, OpeningOptions, ShapeKind, WALL_ID};
 pub use pipeline::{

@@ -249,3 +249,58 @@ fn openings_that_cannot_be_placed_say_why() {
     };
     assert!(simulation_mesh(&sphere, &tube).is_err());
 }
+
+#[test]
+fn flow_extensions_move_the_caps_two_diameters_out_and_stay_watertight() {
+    let axis = [0.0, 0.0, 1.0];
+    let mesh = straight_tube(10.0, 100.0, [0.0; 3], axis, 100, 72);
+    let opts = SimulationOptions {
+        kind: Some(ShapeKind::Tube),
+        extension_diameters: 2.0,
+        ..Default::default()
+    };
+    let plain = simulation_mesh(
+        &mesh,
+        &SimulationOptions {
+            extension_diameters: 0.0,
+            ..opts.clone()
+        },
+    )
+    .unwrap();
+    let sim = simulation_mesh(&mesh, &opts).unwrap();
+    let q = &sim.quality.manifold;
+    assert!(q.watertight && q.euler_characteristic == 2, "{q:?}");
+    assert_eq!(sim.quality.self_intersections, 0);
+    assert_eq!(quality_report(&sim.open().mesh).manifold.boundary_loops, 2);
+    let names: Vec<&str> = sim.faces.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "wall",
+            "inlet",
+            "outlet",
+            "inlet_extension",
+            "outlet_extension"
+        ]
+    );
+    for (cap, before) in sim.faces[1..3].iter().zip(&plain.faces[1..3]) {
+        let d = before.equivalent_diameter_mm;
+        let moved = dot(sub(cap.centroid_mm, before.centroid_mm), before.normal);
+        assert!((moved - 2.0 * d).abs() < 1e-3 * d, "{moved} vs {d}");
+        assert!(
+            (cap.equivalent_diameter_mm / d - 1.0).abs() < 0.01,
+            "{cap:?}"
+        );
+        assert!(dot(cap.normal, before.normal) > 0.99999);
+        // The far cap lies in its plane.
+        let frame = PlaneFrame::new(cap.centroid_mm, cap.normal);
+        let flat = sim
+            .capped
+            .submesh(cap.id)
+            .positions
+            .iter()
+            .map(|p| frame.height(p.map(f64::from)).abs())
+            .fold(0.0, f64::max);
+        assert!(flat < 1e-6 * 150.0, "{flat}");
+    }
+}
