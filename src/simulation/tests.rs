@@ -304,3 +304,93 @@ fn flow_extensions_move_the_caps_two_diameters_out_and_stay_watertight() {
         assert!(flat < 1e-6 * 150.0, "{flat}");
     }
 }
+
+#[test]
+fn remeshing_a_tube_keeps_it_on_the_cylinder_with_flat_caps_and_good_angles() {
+    let axis = [0.0, 0.0, 1.0];
+    let mesh = straight_tube(10.0, 100.0, [0.0; 3], axis, 100, 72);
+    let opts = SimulationOptions {
+        kind: Some(ShapeKind::Tube),
+        remesh_mm: Some(1.0),
+        ..Default::default()
+    };
+    let sim = simulation_mesh(&mesh, &opts).unwrap();
+    check_topology(&sim, &mesh);
+    let report = sim.remesh.as_ref().unwrap();
+    assert!(
+        sim.quality.share_min_angle_20 >= 0.99,
+        "{:?}",
+        sim.quality.min_angle_deg
+    );
+    assert!((report.median_edge_mm - 1.0).abs() < 0.2, "{report:?}");
+    // Every wall point lies within the reported distance of the exact cylinder (the input
+    // polygon's own chord error, 10·(1 − cos(π/72)) mm, included).
+    let chord = 10.0 * (1.0 - (std::f64::consts::PI / 72.0).cos());
+    assert!(report.max_distance_mm < chord + 0.05, "{report:?}");
+    let wall = sim.capped.submesh(WALL_ID);
+    for t in 0..wall.triangle_count() {
+        let c = wall.corners(t);
+        let centroid: [f64; 3] = std::array::from_fn(|i| (c[0][i] + c[1][i] + c[2][i]) / 3.0);
+        let off = (centroid[0].hypot(centroid[1]) - 10.0).abs();
+        assert!(off <= report.max_distance_mm + chord + 1e-6, "{off}");
+    }
+    for (face, opening) in sim.faces[1..].iter().zip(&sim.openings) {
+        assert!(dot(face.normal, opening.normal) > 0.99985, "{face:?}");
+        let polygon =
+            20.0 * ((72.0 / std::f64::consts::TAU) * (std::f64::consts::TAU / 72.0).sin()).sqrt();
+        assert!(
+            (face.equivalent_diameter_mm / polygon - 1.0).abs() < 0.02,
+            "{face:?}"
+        );
+    }
+}
+
+#[test]
+fn remeshing_the_branched_arch_keeps_its_labels_and_raises_its_angles() {
+    let mesh = BranchedArch::mesh();
+    let plain = simulation_mesh(&mesh, &SimulationOptions::default()).unwrap();
+    let opts = SimulationOptions {
+        remesh_mm: Some(1.0),
+        ..Default::default()
+    };
+    let sim = simulation_mesh(&mesh, &opts).unwrap();
+    check_topology(&sim, &mesh);
+    assert!(plain.quality.share_min_angle_20 < 0.9);
+    assert!(
+        sim.quality.share_min_angle_20 >= 0.99,
+        "{:?}",
+        sim.quality.min_angle_deg
+    );
+    let report = sim.remesh.as_ref().unwrap();
+    assert!(report.max_distance_mm < 0.25, "{report:?}");
+    for (a, b) in plain.faces.iter().zip(&sim.faces) {
+        assert_eq!((a.id, &a.name), (b.id, &b.name));
+        if a.id != WALL_ID {
+            assert!(
+                dot(a.normal, b.normal) > 0.99985 && norm(sub(a.centroid_mm, b.centroid_mm)) < 0.2,
+                "{a:?} {b:?}"
+            );
+            assert!((a.area_mm2 / b.area_mm2 - 1.0).abs() < 0.02, "{a:?} {b:?}");
+        }
+    }
+}
+
+#[test]
+fn a_remesh_size_out_of_range_names_the_field() {
+    let mesh = straight_tube(10.0, 100.0, [0.0; 3], [0.0, 0.0, 1.0], 20, 24);
+    let opts = SimulationOptions {
+        remesh_mm: Some(0.0),
+        ..Default::default()
+    };
+    let err = simulation_mesh(&mesh, &opts).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            SimulationError::BadOption {
+                field: "remesh_mm",
+                ..
+            }
+        ),
+        "{err}"
+    );
+}

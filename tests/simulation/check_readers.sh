@@ -15,5 +15,5 @@ trap 'rm -rf "$out"' EXIT
 run() { cargo run --quiet --example simulation -- --out "$out" "$@" > /dev/null; }
 run --stem root
 run --stem root_extended --extension 2
-# remeshed (added with the remesher)
+run --stem root_remeshed --remesh 1.0
 "$venv/bin/python" -W ignore tests/simulation/check_readers.py "$out"
