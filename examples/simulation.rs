@@ -35,6 +35,9 @@ struct Args {
     /// File name stem.
     #[arg(long, default_value = "shape")]
     stem: String,
+    /// Also draw the capped mesh with its faces coloured by id into this PNG.
+    #[arg(long)]
+    picture: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -68,6 +71,21 @@ fn main() -> anyhow::Result<()> {
         serde_json::json!({"source": args.input.as_ref().map(|p| p.display().to_string())});
     let files = write_all(&args.out, &args.stem, &sim, &meta)?;
     let write_s = t.elapsed().as_secs_f64();
+    if let Some(png) = &args.picture {
+        let view = aortagen::render::View {
+            azimuth_deg: -30.0,
+            elevation_deg: 10.0,
+            ..Default::default()
+        };
+        let image = aortagen::render::render_labelled(
+            &sim.capped.mesh,
+            &sim.capped.face_ids,
+            900,
+            900,
+            &view,
+        )?;
+        std::fs::write(png, aortagen::render::encode_png(&image)?)?;
+    }
     let summary = serde_json::json!({
         "input_triangles": mesh.triangle_count(),
         "kind": sim.kind,

@@ -126,7 +126,11 @@ fn make_delaunay(q: &[[f64; 2]], triangles: &mut [[usize; 3]]) {
             }
         }
         let mut touched = vec![false; triangles.len()];
-        for (&(a, b), &(t, c)) in &by_edge {
+        // Sorted, so that ties between co-circular vertices always resolve the same way.
+        let mut edges: Vec<((usize, usize), (usize, usize))> =
+            by_edge.iter().map(|(&k, &v)| (k, v)).collect();
+        edges.sort_unstable();
+        for ((a, b), (t, c)) in edges {
             let Some(&(u, d)) = by_edge.get(&(b, a)) else {
                 continue;
             };

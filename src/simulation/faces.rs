@@ -168,7 +168,10 @@ impl LabelledMesh {
             }
         }
         let mut out = HashMap::new();
-        for (&(a, b), ids) in &users {
+        // Edges in a fixed order, so the sums come out the same on every run.
+        let mut edges: Vec<(&(u32, u32), &Vec<u32>)> = users.iter().collect();
+        edges.sort_unstable_by_key(|(k, _)| **k);
+        for (&(a, b), ids) in edges {
             let border = ids.len() == 1 || ids.iter().any(|&i| i != ids[0]);
             if !border {
                 continue;

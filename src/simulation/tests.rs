@@ -394,3 +394,18 @@ fn a_remesh_size_out_of_range_names_the_field() {
         "{err}"
     );
 }
+
+#[test]
+fn the_same_input_gives_the_same_remeshed_mesh() {
+    let (_, mesh) = crate::synth::generate_root(7, 2, true);
+    let opts = SimulationOptions {
+        remesh_mm: Some(1.5),
+        ..Default::default()
+    };
+    let (a, b) = (
+        simulation_mesh(&mesh, &opts).unwrap(),
+        simulation_mesh(&mesh, &opts).unwrap(),
+    );
+    assert_eq!(a.capped, b.capped);
+    assert_eq!(a.faces, b.faces);
+}
