@@ -72,18 +72,37 @@ fn main() -> anyhow::Result<()> {
     let files = write_all(&args.out, &args.stem, &sim, &meta)?;
     let write_s = t.elapsed().as_secs_f64();
     if let Some(png) = &args.picture {
-        let view = aortagen::render::View {
+        // Seen from above and from below, side by side, so that every cap shows.
+        let side = 700;
+        let views = [35.0, -35.0].map(|elevation_deg| aortagen::render::View {
             azimuth_deg: -30.0,
-            elevation_deg: 10.0,
+            elevation_deg,
             ..Default::default()
+        });
+        let mut halves = Vec::new();
+        for view in &views {
+            let m = &sim.capped;
+            halves.push(aortagen::render::render_labelled(
+                &m.mesh,
+                &m.face_ids,
+                side,
+                side,
+                view,
+            )?);
+        }
+        let row = 3 * side as usize;
+        let pixels = (0..side as usize)
+            .flat_map(|y| {
+                halves
+                    .iter()
+                    .flat_map(move |h| h.pixels[y * row..(y + 1) * row].to_vec())
+            })
+            .collect();
+        let image = aortagen::render::RgbImage {
+            width: 2 * side,
+            height: side,
+            pixels,
         };
-        let image = aortagen::render::render_labelled(
-            &sim.capped.mesh,
-            &sim.capped.face_ids,
-            900,
-            900,
-            &view,
-        )?;
         std::fs::write(png, aortagen::render::encode_png(&image)?)?;
     }
     let summary = serde_json::json!({
