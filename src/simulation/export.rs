@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::faces::LabelledMesh;
 use super::pipeline::SimulationMesh;
-use super::quality::quality_report;
+use super::prepared::PreparedSimulation;
 use crate::formats::{
     FacePatch, LabelledWriteError, MeshMetadata, write_faces_glb, write_grouped_obj,
     write_legacy_vtk, write_multi_solid_stl, write_vtp,
@@ -57,6 +57,16 @@ pub enum Variant {
     Open,
 }
 
+impl Variant {
+    /// `capped` or `open`, as in parameters and file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Capped => "capped",
+            Self::Open => "open",
+        }
+    }
+}
+
 /// Encodes a labelled mesh.
 pub fn encode(
     mesh: &LabelledMesh,
@@ -81,26 +91,11 @@ pub fn encode(
     }
 }
 
-/// The sidecar JSON of one variant.
+/// The sidecar JSON of one variant (see [`SimulationSummary::sidecar`]).
 pub fn sidecar(sim: &SimulationMesh, variant: Variant, meta: &MeshMetadata) -> serde_json::Value {
-    let (faces, quality) = match variant {
-        Variant::Capped => (sim.faces.clone(), sim.quality.clone()),
-        Variant::Open => {
-            let open = sim.open();
-            (open.face_table(), quality_report(&open.mesh))
-        }
-    };
-    serde_json::json!({
-        "metadata": meta.to_json(),
-        "variant": variant,
-        "kind": sim.kind,
-        "face_id_array": "ModelFaceID",
-        "faces": faces,
-        "openings": sim.faces.iter().filter(|f| sim.openings.iter().any(|o| o.id == f.id)).collect::<Vec<_>>(),
-        "opening_planes": sim.openings,
-        "quality": quality,
-        "remesh": sim.remesh,
-    })
+    PreparedSimulation::new(sim.clone())
+        .summary
+        .sidecar(variant, meta)
 }
 
 /// Writes `<stem>_<variant>.<ext>` and its sidecar `<…>.json` into `dir` for every format
@@ -112,16 +107,14 @@ pub fn write_all(
     meta: &MeshMetadata,
 ) -> anyhow::Result<Vec<PathBuf>> {
     let mut written = Vec::new();
-    let open = sim.open();
-    for (variant, mesh) in [(Variant::Capped, &sim.capped), (Variant::Open, &open)] {
-        let name = match variant {
-            Variant::Capped => "capped",
-            Variant::Open => "open",
-        };
-        let side = serde_json::to_vec_pretty(&sidecar(sim, variant, meta))?;
+    let prepared = PreparedSimulation::new(sim.clone());
+    for variant in [Variant::Capped, Variant::Open] {
+        let mesh = prepared.mesh(variant);
+        let side = serde_json::to_vec_pretty(&prepared.summary.sidecar(variant, meta))?;
         for format in SimulationFormat::ALL {
+            let name = variant.name();
             let path = dir.join(format!("{stem}_{name}.{}", format.extension()));
-            std::fs::write(&path, encode(mesh, format, meta)?)?;
+            std::fs::write(&path, encode(&mesh, format, meta)?)?;
             let mut side_path = path.clone().into_os_string();
             side_path.push(".json");
             std::fs::write(&side_path, &side)?;

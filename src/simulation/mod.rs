@@ -15,6 +15,10 @@
 //! 5. isotropic remeshing ([`remesh`], optional), keeping the cap planes and rims;
 //! 6. face table ([`faces`]) and quality ([`quality`]).
 //!
+//! [`request`] checks the parameters callers give (the service, the command line);
+//! [`prepared`] keeps a result so every file and sidecar of either variant is written
+//! from it without running the pipeline again.
+//!
 //! Face ids are described in [`opening`]; the writers are in [`crate::formats`].
 
 pub mod cap;
@@ -26,8 +30,10 @@ pub mod faces;
 pub mod intersect;
 pub mod opening;
 pub mod pipeline;
+pub mod prepared;
 pub mod quality;
 pub mod remesh;
+pub mod request;
 pub mod root_openings;
 #[cfg(test)]
 pub(crate) mod test_shapes;
@@ -41,7 +47,10 @@ pub use export::{SimulationFormat, Variant, encode, sidecar, write_all};
 pub use faces::{FaceData, FaceName, LabelledMesh};
 pub use opening::{FIRST_OUTLET_ID, INLET_ID, Opening, OpeningOptions, ShapeKind, WALL_ID};
 pub use pipeline::{
-    SimulationMesh, SimulationOptions, cap_openings, find_openings, simulation_mesh,
+    SimulationMesh, SimulationOptions, Step, cap_openings, find_openings, simulation_mesh,
+    simulation_mesh_observed,
 };
+pub use prepared::{PreparedSimulation, SimulationSummary, StoredSimulation};
 pub use quality::{QualityReport, quality_report};
 pub use remesh::{RemeshOptions, RemeshReport, remesh};
+pub use request::{MeshRequest, ParamError, SimulationParams, SimulationRequest};

@@ -76,12 +76,22 @@ pub fn find_openings(
     kind: Option<ShapeKind>,
     opts: &OpeningOptions,
 ) -> Result<(ShapeKind, Vec<Opening>), SimulationError> {
+    find_openings_observed(mesh, kind, opts, &mut |_| {})
+}
+
+fn find_openings_observed(
+    mesh: &TriMesh,
+    kind: Option<ShapeKind>,
+    opts: &OpeningOptions,
+    observe: &mut dyn FnMut(Step),
+) -> Result<(ShapeKind, Vec<Opening>), SimulationError> {
     opts.validate()?;
     let surface = Surface::new(mesh)?;
     let kind = match kind {
         Some(k) => k,
         None => detect_kind(&surface, opts)?,
     };
+    observe(Step::Kind(kind));
     let openings = match kind {
         ShapeKind::Root => root_openings(&surface, opts)?,
         ShapeKind::Aorta | ShapeKind::Tube => tree_openings(&surface, kind, opts)?,
@@ -102,10 +112,51 @@ fn detect_kind(surface: &Surface, opts: &OpeningOptions) -> Result<ShapeKind, Si
     })
 }
 
+/// A step of [`simulation_mesh_observed`], reported as it starts (the kind once it is
+/// known), so a long run can show where it is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Step {
+    /// The rules the openings follow, given or detected.
+    Kind(ShapeKind),
+    /// Cutting the surface open at the openings.
+    Cut,
+    /// Appending flow extensions.
+    Extend,
+    /// Closing the openings with flat caps.
+    Cap,
+    /// Isotropic remeshing (the long step: seconds per shape).
+    Remesh,
+    /// Face table and quality report.
+    Measure,
+}
+
+impl Step {
+    /// A few words for progress output.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Kind(_) => "finding the openings",
+            Self::Cut => "cutting the openings",
+            Self::Extend => "adding flow extensions",
+            Self::Cap => "capping",
+            Self::Remesh => "remeshing",
+            Self::Measure => "measuring faces and quality",
+        }
+    }
+}
+
 /// The whole pipeline: openings, cut, extensions, caps, remeshing, faces and quality.
 pub fn simulation_mesh(
     mesh: &TriMesh,
     opts: &SimulationOptions,
+) -> Result<SimulationMesh, SimulationError> {
+    simulation_mesh_observed(mesh, opts, &mut |_| {})
+}
+
+/// [`simulation_mesh`], telling `observe` each step as it starts.
+pub fn simulation_mesh_observed(
+    mesh: &TriMesh,
+    opts: &SimulationOptions,
+    observe: &mut dyn FnMut(Step),
 ) -> Result<SimulationMesh, SimulationError> {
     let remesh_opts = opts.remesh_mm.map(RemeshOptions::new).transpose()?;
     if !(opts.extension_diameters.is_finite() && (0.0..=20.0).contains(&opts.extension_diameters)) {
@@ -114,22 +165,27 @@ pub fn simulation_mesh(
             format!("{} must lie within 0–20", opts.extension_diameters),
         ));
     }
-    let (kind, openings) = find_openings(mesh, opts.kind, &opts.openings)?;
+    let (kind, openings) = find_openings_observed(mesh, opts.kind, &opts.openings, observe)?;
+    observe(Step::Cut);
     let positions = mesh.positions.iter().map(|p| p.map(f64::from)).collect();
     let mut open = cut_openings(positions, mesh.triangles.clone(), &openings)?;
     let mut caps = openings.clone();
     if opts.extension_diameters > 0.0 {
+        observe(Step::Extend);
         caps = extend_openings(&mut open, &openings, opts.extension_diameters)?;
     }
+    observe(Step::Cap);
     let mut capped = cap_openings(&open, &caps)?;
     let remesh_report = match remesh_opts {
         Some(r) => {
+            observe(Step::Remesh);
             let (m, report) = remesh(&capped, &r)?;
             capped = m;
             Some(report)
         }
         None => None,
     };
+    observe(Step::Measure);
     Ok(SimulationMesh {
         kind,
         openings,
