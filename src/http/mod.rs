@@ -19,6 +19,7 @@ pub mod models;
 pub mod openapi;
 pub mod reports;
 pub mod shapes;
+pub mod simulation_meshes;
 pub mod thumbnails;
 pub mod upload_archive;
 
@@ -59,6 +60,8 @@ pub struct AppState {
     pub read_only_switch: ReadOnlySwitch,
     /// Encoded mesh downloads.
     pub mesh_cache: Arc<mesh_cache::MeshCache>,
+    /// Simulation meshes being made: bounded, deduplicated, stored.
+    pub simulations: Arc<crate::jobs::simulation::SimulationWork>,
 }
 
 /// Every documented route, with its OpenAPI description.
@@ -71,6 +74,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(anchors::router())
         .merge(cohorts::router())
         .merge(shapes::router())
+        .merge(simulation_meshes::router())
         .merge(jobs::router())
         .merge(reports::router())
         .merge(thumbnails::router())
