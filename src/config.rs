@@ -115,6 +115,17 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_REQUEST_TIMEOUT_SECS", default_value_t = 30)]
     pub request_timeout_secs: u64,
 
+    /// Seconds a client may take to send a request's headers, and may keep a connection idle
+    /// between requests, before the connection is closed (guards against slow-header clients).
+    #[arg(long, env = "AORTAGEN_HEADER_TIMEOUT_SECS", default_value_t = 15,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub header_timeout_secs: u64,
+
+    /// Most client connections open at once; further clients wait in the listen backlog.
+    #[arg(long, env = "AORTAGEN_MAX_CONNECTIONS", default_value_t = 1024,
+          value_parser = clap::value_parser!(u64).range(1..=65_536))]
+    pub max_connections: u64,
+
     /// Seconds a model upload (`POST /v1/models`, multipart or a zip body) may take before it
     /// is answered 408; longer than the request timeout so a large upload on a slow link completes.
     #[arg(long, env = "AORTAGEN_UPLOAD_TIMEOUT_SECS", default_value_t = 600)]

@@ -1,7 +1,7 @@
 //! The service lifecycle: open and migrate the database, recover interrupted jobs, register
 //! the bundled model, bind, then serve and run workers until a shutdown signal.
 
-use std::future::{Future, IntoFuture};
+use std::future::Future;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
@@ -140,14 +140,13 @@ impl Application {
         let controls = self.state.jobs.controls.clone();
         let app = http::router(self.state.clone());
         tracing::info!(port = self.port, workers, "listening");
-        let serve = axum::serve(self.listener, app)
-            .with_graceful_shutdown(async move {
-                shutdown.await;
-                tracing::info!("shutting down: interrupting running jobs");
-                controls.shut_down();
-                let _ = stop_tx.send(true);
-            })
-            .into_future();
+        let limits = http::server::ConnectionLimits::from_config(&self.state.config);
+        let serve = http::server::serve(self.listener, app, limits, async move {
+            shutdown.await;
+            tracing::info!("shutting down: interrupting running jobs");
+            controls.shut_down();
+            let _ = stop_tx.send(true);
+        });
         let mut served = tokio::spawn(serve);
         // Runs until the signal (or until the server fails, which also ends the service).
         let early = tokio::select! {

@@ -18,6 +18,7 @@ pub mod model_upload;
 pub mod models;
 pub mod openapi;
 pub mod reports;
+pub mod server;
 pub mod shapes;
 pub mod simulation_meshes;
 pub mod thumbnails;

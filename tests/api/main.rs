@@ -7,6 +7,7 @@ mod access;
 mod cohorts;
 mod conditioned;
 mod conformance;
+mod connections;
 mod crash_safety;
 mod cross_site;
 mod dashboard;
