@@ -3,6 +3,7 @@
 
 pub mod access;
 pub mod anchors;
+pub mod cohort_meshes;
 pub mod cohorts;
 pub mod cross_site;
 pub mod dashboard;
@@ -76,6 +77,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(cohorts::router())
         .merge(shapes::router())
         .merge(simulation_meshes::router())
+        .merge(cohort_meshes::router())
         .merge(jobs::router())
         .merge(reports::router())
         .merge(thumbnails::router())

@@ -352,7 +352,7 @@ async fn get_shape_mesh(
 const CACHE_FOREVER: &str = "public, max-age=31536000, immutable";
 
 /// Reads the stored unit-ball mesh and writes it in `format` and `units`, off the executor.
-async fn encode_mesh(
+pub(super) async fn encode_mesh(
     state: &AppState,
     shape: ShapeRow,
     format: MeshFormat,

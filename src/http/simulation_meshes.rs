@@ -204,7 +204,8 @@ fn simulation_etag(
 /// different mesh from the same shape.
 const CACHE_REVALIDATE: &str = "public, no-cache";
 
-fn metadata(shape: &ShapeRow, request: &SimulationRequest) -> MeshMetadata {
+/// Metadata of a simulation file: units, generator, the shape and the options.
+pub(super) fn metadata(shape: &ShapeRow, request: &SimulationRequest) -> MeshMetadata {
     MeshMetadata {
         units: "mm".to_owned(),
         generator: format!("aortagen {}", crate::VERSION),

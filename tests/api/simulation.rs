@@ -22,6 +22,20 @@ fn problem_field(r: &crate::helpers::TestResponse) -> (StatusCode, String) {
     (r.status, field)
 }
 
+/// The files of a zip archive in order: name and bytes.
+fn unzip(bytes: &[u8]) -> Vec<(String, Vec<u8>)> {
+    use std::io::Read as _;
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes)).unwrap();
+    (0..archive.len())
+        .map(|i| {
+            let mut file = archive.by_index(i).unwrap();
+            let mut data = Vec::new();
+            file.read_to_end(&mut data).unwrap();
+            (file.name().unwrap().into_owned(), data)
+        })
+        .collect()
+}
+
 fn faces_named<'a>(sidecar: &'a Value, name: &str) -> Vec<&'a Value> {
     sidecar["faces"]
         .as_array()
@@ -114,6 +128,34 @@ async fn a_root_downloads_capped_and_open_from_one_stored_mesh_with_its_face_tab
     let detail = app.get(&format!("/v1/shapes/{id}")).await.json();
     assert_eq!(detail["faces"], capped["faces"]);
 
+    let zip = app
+        .get(&format!(
+            "/v1/cohorts/{}/meshes.zip?format=vtp",
+            detail["cohort_id"]
+        ))
+        .await;
+    assert_eq!(zip.status, StatusCode::OK);
+    let files = unzip(&zip.body);
+    let name = format!("shape-{id}-capped.vtp");
+    assert_eq!(
+        files.iter().map(|f| f.0.as_str()).collect::<Vec<_>>(),
+        [name.as_str(), "manifest.csv"]
+    );
+    assert_eq!(
+        files[0].1,
+        vtp.body.to_vec(),
+        "the archive holds the download"
+    );
+    let manifest = String::from_utf8(files[1].1.clone()).unwrap();
+    let row = manifest.lines().nth(1).unwrap();
+    assert!(row.starts_with(&format!("{id},0,{name},default,")), "{row}");
+    assert!(row.contains("inlet:") && row.contains("outlet:"), "{row}");
+    assert_eq!(
+        app.count("shape_simulation").await,
+        1,
+        "the archive reads the stored mesh"
+    );
+
     let etag = vtp.header("etag").unwrap().to_owned();
     let again = app
         .request(
@@ -187,5 +229,28 @@ async fn bad_parameters_are_refused_before_any_geometry_naming_the_field() {
         problem_field(&r),
         (StatusCode::BAD_REQUEST, "openings".into())
     );
+    let r = app
+        .get(&format!(
+            "/v1/cohorts/{cohort}/meshes.zip?format=vtp&remesh_mm=50"
+        ))
+        .await;
+    assert_eq!(
+        problem_field(&r),
+        (StatusCode::BAD_REQUEST, "remesh_mm".into())
+    );
     assert_eq!(app.count("shape_simulation").await, 0);
+
+    let zip = app
+        .get(&format!("/v1/cohorts/{cohort}/meshes.zip?format=stl"))
+        .await;
+    assert_eq!(zip.status, StatusCode::OK);
+    let files = unzip(&zip.body);
+    let plain = app.get(&format!("/v1/shapes/{id}/mesh?format=stl")).await;
+    assert_eq!(files[0], (format!("shape-{id}.stl"), plain.body.to_vec()));
+    let manifest = String::from_utf8(files[1].1.clone()).unwrap();
+    assert_eq!(
+        manifest.lines().next(),
+        Some(aortagen::http::cohort_meshes::MANIFEST_HEADER)
+    );
+    assert_eq!(manifest.lines().count(), 2, "{manifest}");
 }
