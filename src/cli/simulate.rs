@@ -11,6 +11,7 @@ use anyhow::{Context as _, bail};
 use serde::Serialize;
 
 use crate::formats::{LoadedMesh, MeshMetadata};
+use crate::geometry::TriMesh;
 use crate::simulation::request::failure_field;
 use crate::simulation::{
     FaceData, MeshRequest, ParamError, PreparedSimulation, SimulationParams, SimulationRequest,
@@ -138,9 +139,6 @@ pub fn write(
     loaded: &LoadedMesh,
     flags: &SimulationFlags,
 ) -> anyhow::Result<SimulationOutput> {
-    let (format, request) = flags
-        .request()
-        .map_err(|e| anyhow::anyhow!("{}: {}", flag(e.field), e.message))?;
     match loaded.units.as_deref() {
         None | Some("mm") => {}
         Some(other) => bail!(
@@ -148,9 +146,27 @@ pub fn write(
             input.display()
         ),
     }
+    let source = input.file_name().map_or_else(
+        || input.display().to_string(),
+        |n| n.to_string_lossy().into(),
+    );
+    write_surface(&source, &loaded.mesh, &input.with_extension(""), flags)
+}
+
+/// Makes the simulation mesh of `mesh` (mm, from `source`) and writes it to `flags.out`,
+/// else `<stem>_<capped|open>.<format>`, with its sidecar.
+pub fn write_surface(
+    source: &str,
+    mesh: &TriMesh,
+    stem: &Path,
+    flags: &SimulationFlags,
+) -> anyhow::Result<SimulationOutput> {
+    let (format, request) = flags
+        .request()
+        .map_err(|e| anyhow::anyhow!("{}: {}", flag(e.field), e.message))?;
     let started = Instant::now();
     let mut kind = request.options.kind;
-    let sim = simulation_mesh_observed(&loaded.mesh, &request.options, &mut |step| {
+    let sim = simulation_mesh_observed(mesh, &request.options, &mut |step| {
         if let Step::Kind(k) = step {
             kind = Some(k);
         }
@@ -171,20 +187,15 @@ pub fn write(
     let seconds = started.elapsed().as_secs_f64();
     let prepared = PreparedSimulation::new(sim);
     let variant = request.variant;
-    let source = input.file_name().map_or_else(
-        || input.display().to_string(),
-        |n| n.to_string_lossy().into(),
-    );
     let meta = MeshMetadata {
         extras: serde_json::json!({ "source": source, "variant": variant,
             "simulation": request.options }),
         ..MeshMetadata::new("mm")
     };
     let out = flags.out.clone().unwrap_or_else(|| {
-        let stem = input
-            .file_stem()
-            .map_or("mesh".into(), |s| s.to_string_lossy());
-        input.with_file_name(format!("{stem}_{}.{}", variant.name(), format.extension()))
+        let mut name = stem.as_os_str().to_owned();
+        name.push(format!("_{}.{}", variant.name(), format.extension()));
+        PathBuf::from(name)
     });
     let bytes = prepared.file(format, variant, &meta)?;
     std::fs::write(&out, &bytes).with_context(|| format!("cannot write {}", out.display()))?;
@@ -201,6 +212,53 @@ pub fn write(
         seconds,
         faces: prepared.summary.faces(variant).to_vec(),
     })
+}
+
+/// The simulation flags of `aortagen generate`: a simulation mesh beside every shape.
+#[derive(Debug, Default, Clone, clap::Args)]
+pub struct GenerateSimulation {
+    /// Also write each shape's simulation mesh, `shape_NNNN_<variant>.<format>` with its
+    /// sidecar JSON: capped or open.
+    #[arg(long, value_name = "VARIANT")]
+    pub simulation: Option<String>,
+    /// Format of the simulation meshes: vtp (default), vtk, stl, obj or glb.
+    #[arg(long, value_name = "FORMAT", requires = "simulation")]
+    pub simulation_format: Option<String>,
+    /// Isotropic remesh of the simulation meshes to this edge length, mm (0.1–10).
+    #[arg(long, value_name = "MM", requires = "simulation")]
+    pub remesh_mm: Option<f64>,
+    /// Flow extensions of the simulation meshes, in diameters of each opening (0–20).
+    #[arg(long, value_name = "DIAMETERS", requires = "simulation")]
+    pub extension_diameters: Option<f64>,
+}
+
+impl GenerateSimulation {
+    /// The mesh flags these stand for (`None` without `--simulation`), checked before any
+    /// shape is generated.
+    pub fn flags(&self) -> anyhow::Result<Option<SimulationFlags>> {
+        let Some(variant) = self.simulation.as_deref() else {
+            return Ok(None);
+        };
+        let flags = SimulationFlags {
+            capped: variant == "capped",
+            open: variant == "open",
+            format: self.simulation_format.clone(),
+            remesh_mm: self.remesh_mm,
+            extension_diameters: self.extension_diameters,
+            ..Default::default()
+        };
+        if !flags.wanted() {
+            bail!("--simulation: unknown variant {variant:?}; use capped or open");
+        }
+        flags.request().map_err(|e| {
+            let name = match e.field {
+                "format" => "--simulation-format".to_owned(),
+                f => flag(f),
+            };
+            anyhow::anyhow!("{name}: {}", e.message)
+        })?;
+        Ok(Some(flags))
+    }
 }
 
 /// The written mesh in the text report, one face a line.

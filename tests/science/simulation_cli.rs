@@ -1,10 +1,14 @@
-//! `aortagen mesh --capped|--open` end to end on a synthetic root in a temporary
-//! directory: the labelled file and its sidecar, the face table against the library's
-//! pipeline on the same surface, and flags refused with their names.
+//! `aortagen mesh --capped|--open` and `aortagen generate --simulation` end to end in a
+//! temporary directory: the labelled file and its sidecar, the face table against the
+//! library's pipeline on the same surface, and flags refused with their names.
 
+use aortagen::cli::generate::{GenerateArgs, Units};
 use aortagen::cli::mesh::{MeshArgs, run};
-use aortagen::cli::simulate::SimulationFlags;
+use aortagen::cli::simulate::{GenerateSimulation, SimulationFlags};
+use aortagen::cohort::{Selection, Weighting};
 use aortagen::formats::{MeshFormat, MeshMetadata, load_mesh_file, write_mesh};
+use aortagen::sdf::backend::Backend;
+use aortagen::sdf::inference::reconstruct::ExtractionMethod;
 use aortagen::simulation::{SimulationOptions, simulation_mesh};
 
 fn args(file: &std::path::Path, simulation: SimulationFlags) -> MeshArgs {
@@ -88,4 +92,63 @@ fn an_open_stl_has_one_solid_and_stray_or_bad_flags_are_named() {
     };
     let e = format!("{:#}", run(args(&stl, beyond)).unwrap_err());
     assert!(e.contains("--outlet-above-stj-mm"), "{e}");
+}
+
+fn generate_args(out: &std::path::Path, simulation: GenerateSimulation) -> GenerateArgs {
+    GenerateArgs {
+        model: std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default"),
+        arity: 2,
+        weights: None,
+        weighting: Weighting::Dirichlet,
+        selection: Selection::Uniform,
+        anchors: Vec::new(),
+        latent_noise: 0.0,
+        min_novelty: None,
+        targets: Vec::new(),
+        max_candidates: 1,
+        novelty_points: 500,
+        count: 1,
+        seed: 5,
+        resolution: 64,
+        format: MeshFormat::Glb,
+        units: Units::Mm,
+        out: out.to_path_buf(),
+        backend: Backend::default(),
+        extraction: ExtractionMethod::Fast,
+        simulation,
+    }
+}
+
+#[test]
+fn generate_writes_each_shapes_simulation_mesh_beside_it_and_checks_flags_first() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cohort");
+    let simulation = GenerateSimulation {
+        simulation: Some("capped".into()),
+        simulation_format: Some("obj".into()),
+        ..Default::default()
+    };
+    aortagen::cli::generate::run(generate_args(&out, simulation)).unwrap();
+    let sidecar: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("shape_0000_capped.obj.json")).unwrap())
+            .unwrap();
+    let obj = std::fs::read_to_string(out.join("shape_0000_capped.obj")).unwrap();
+    assert_eq!(
+        obj.matches("\ng ").count(),
+        3,
+        "wall, inlet and outlet groups"
+    );
+    let shape = load_mesh_file(&out.join("shape_0000.glb")).unwrap();
+    let direct = simulation_mesh(&shape.mesh, &SimulationOptions::default()).unwrap();
+    assert_eq!(sidecar["faces"], serde_json::json!(direct.faces));
+
+    let bad = GenerateSimulation {
+        simulation: Some("capped".into()),
+        remesh_mm: Some(50.0),
+        ..Default::default()
+    };
+    let elsewhere = dir.path().join("never");
+    let e = aortagen::cli::generate::run(generate_args(&elsewhere, bad)).unwrap_err();
+    assert!(e.to_string().starts_with("--remesh-mm"), "{e}");
+    assert!(!elsewhere.exists(), "refused before generating");
 }
