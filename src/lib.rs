@@ -19,6 +19,7 @@ pub mod jobs;
 pub mod render;
 pub mod report;
 pub mod sdf;
+pub mod simulation;
 pub mod startup;
 pub mod synth;
 pub mod telemetry;

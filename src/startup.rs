@@ -18,6 +18,7 @@ use crate::engine::Engine;
 use crate::http::access::AccessPolicy;
 use crate::http::mesh_cache::MeshCache;
 use crate::http::{self, AppState};
+use crate::jobs::simulation::{self, SimulationWork};
 use crate::jobs::{JobContext, JobControls, JobQueue, worker};
 use crate::telemetry::ServiceMetrics;
 
@@ -88,6 +89,10 @@ impl Application {
         let state = AppState {
             pool,
             mesh_cache,
+            simulations: Arc::new(SimulationWork::new(
+                simulation::DEFAULT_SLOTS,
+                simulation::DEFAULT_BACKLOG,
+            )),
             config: Arc::new(config),
             jobs,
             queue,

@@ -13,13 +13,14 @@ use super::surface::Surface;
 use crate::geometry::mesh::{norm, sub};
 
 /// Vertex adjacency with edge lengths, in compressed rows.
-struct Graph {
+pub(crate) struct Graph {
     offsets: Vec<usize>,
     targets: Vec<(u32, f64)>,
 }
 
 impl Graph {
-    fn new(surface: &Surface) -> Self {
+    /// The edge graph of `surface`.
+    pub(crate) fn new(surface: &Surface) -> Self {
         let n = surface.positions.len();
         let mut edges: Vec<(u32, u32)> = surface
             .triangles
@@ -45,7 +46,7 @@ impl Graph {
     }
 
     /// Shortest edge-path distances from `source` (infinite where unreachable).
-    fn distances(&self, source: usize) -> Vec<f64> {
+    pub(crate) fn distances(&self, source: usize) -> Vec<f64> {
         let mut dist = vec![f64::INFINITY; self.offsets.len() - 1];
         let mut heap = BinaryHeap::new();
         dist[source] = 0.0;
@@ -68,7 +69,8 @@ impl Graph {
     }
 }
 
-fn farthest(dist: &[f64]) -> usize {
+/// The vertex with the largest finite distance.
+pub(crate) fn farthest(dist: &[f64]) -> usize {
     (0..dist.len())
         .filter(|&i| dist[i].is_finite())
         .max_by(|&a, &b| dist[a].total_cmp(&dist[b]))
@@ -76,7 +78,7 @@ fn farthest(dist: &[f64]) -> usize {
 }
 
 /// A vertex of the largest connected piece of the surface (by vertex count).
-fn seed_vertex(surface: &Surface) -> usize {
+pub(crate) fn seed_vertex(surface: &Surface) -> usize {
     let n = surface.positions.len();
     let mut parent: Vec<usize> = (0..n).collect();
     fn root(parent: &mut [usize], mut v: usize) -> usize {

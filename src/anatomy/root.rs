@@ -331,8 +331,24 @@ pub fn measure_root_with_profile(
     mesh: &TriMesh,
 ) -> Result<(RootMeasurements, RootLandmarks, VesselMeasurements), MeasureError> {
     let surface = Surface::new(mesh)?;
+    measure_prepared_root(&surface).map(|(m, l, v, _)| (m, l, v))
+}
+
+/// [`measure_root_with_profile`] of a prepared surface, also returning the centreline the
+/// landmark arc lengths refer to (for planes placed relative to the landmarks).
+pub(crate) fn measure_prepared_root(
+    surface: &Surface,
+) -> Result<
+    (
+        RootMeasurements,
+        RootLandmarks,
+        VesselMeasurements,
+        Centreline,
+    ),
+    MeasureError,
+> {
     let opts = MeasureOptions::default();
-    let (line, vessel) = measure_prepared(&surface, &opts)?;
+    let (line, vessel) = measure_prepared(surface, &opts)?;
     let stations = &vessel.stations;
     let spacing = line.length() / stations.len().max(1) as f64;
     let profile = smooth(
@@ -354,7 +370,7 @@ pub fn measure_root_with_profile(
     let length = line.length();
     let forward = stations[peak].s_mm <= 0.5 * length;
     let root = RootLine {
-        surface: &surface,
+        surface,
         line: &line,
         forward,
     };
@@ -386,7 +402,7 @@ pub fn measure_root_with_profile(
         .sample(sigma_stj)
         .ok_or_else(|| missing("STJ", sigma_stj))?;
     let (major, minor) = annulus.section.feret();
-    let sinus = sinus_diameter(&surface, annulus.section.centroid, stj.section.centroid)
+    let sinus = sinus_diameter(surface, annulus.section.centroid, stj.section.centroid)
         .ok_or_else(|| missing("sinus", 0.5 * (sigma_annulus + sigma_stj)))?;
 
     let distal_start = sigma_stj + 0.5 * (length - sigma_stj);
@@ -419,5 +435,5 @@ pub fn measure_root_with_profile(
         annulus_s_mm: to_s(sigma_annulus),
         stj_s_mm: to_s(sigma_stj),
     };
-    Ok((measurements, landmarks, vessel))
+    Ok((measurements, landmarks, vessel, line))
 }

@@ -6,9 +6,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use anyhow::Context;
+use anyhow::{Context, bail};
 
 use super::progress::{init_logging, terminal_bar};
+use super::simulate::{self, GenerateSimulation, SimulationFlags, write_surface};
 use crate::cohort::targets::feasibility::training_ranges;
 use crate::cohort::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, parse_target_arg};
 use crate::cohort::weights::parse_weights;
@@ -116,6 +117,9 @@ pub struct GenerateArgs {
     /// every grid sample (the reference; both give the same mesh).
     #[arg(long, value_enum, default_value = "fast")]
     pub extraction: ExtractionMethod,
+    /// Simulation meshes beside the shapes.
+    #[command(flatten)]
+    pub simulation: GenerateSimulation,
 }
 
 fn parse_format(s: &str) -> Result<MeshFormat, String> {
@@ -161,6 +165,10 @@ fn flag_error(e: RequestError) -> anyhow::Error {
 /// Runs `aortagen generate`.
 pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     init_logging();
+    let simulation = args.simulation.flags()?;
+    if simulation.is_some() && args.units == Units::Unit {
+        bail!("--simulation needs --units mm: simulation meshes are made in mm");
+    }
     let request = CohortRequest::parse(args.fields()?, RequestLimits::NONE, || args.seed)
         .map_err(flag_error)?;
     let engine: Arc<dyn Engine> = Arc::new(
@@ -198,6 +206,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     let names: Vec<String> = manifest.shapes.iter().map(|s| s.name.clone()).collect();
     let writer = ShapeWriter {
         args: &args,
+        simulation,
         model_sha256: &manifest.weights.sha256,
         names: &names,
     };
@@ -275,6 +284,7 @@ fn print_target_ranges(request: &CohortRequest<String>, setup: &CohortSetup) {
 /// Writes generated shapes with their records.
 struct ShapeWriter<'a> {
     args: &'a GenerateArgs,
+    simulation: Option<SimulationFlags>,
     model_sha256: &'a str,
     names: &'a [String],
 }
@@ -303,6 +313,16 @@ impl ShapeWriter<'_> {
         let json_path = stem.with_extension("json");
         std::fs::write(&json_path, serde_json::to_vec_pretty(&record)?)
             .with_context(|| format!("cannot write {}", json_path.display()))?;
+        if let Some(flags) = &self.simulation {
+            let source = mesh_path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned());
+            // A shape without usable openings is reported and the cohort goes on.
+            match write_surface(&source.unwrap_or_default(), &mesh, &stem, flags) {
+                Ok(out) => eprintln!("{}", simulate::to_text(&out)),
+                Err(e) => eprintln!("shape_{:04}: {e:#}", shape.index),
+            }
+        }
         Ok(mesh_path)
     }
 

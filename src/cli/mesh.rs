@@ -1,11 +1,13 @@
 //! `aortagen mesh`: reports what a mesh file holds (counts, area, volume, closedness,
-//! topology, extent, units) and converts it to another format.
+//! topology, extent, units), converts it to another format, and with `--capped` or
+//! `--open` writes its simulation mesh ([`super::simulate`]).
 
 use std::path::PathBuf;
 
 use anyhow::Context as _;
 use serde::Serialize;
 
+use super::simulate::{self, SimulationFlags};
 use crate::formats::{LoadedMesh, MeshFormat, MeshMetadata, load_mesh_file, write_mesh};
 
 /// Arguments of `aortagen mesh`.
@@ -23,6 +25,9 @@ pub struct MeshArgs {
     /// units the input states, else "unknown".
     #[arg(long, requires = "convert")]
     pub units: Option<String>,
+    /// Simulation mesh options.
+    #[command(flatten)]
+    pub simulation: SimulationFlags,
 }
 
 /// Everything `aortagen mesh` reports about one file.
@@ -160,6 +165,7 @@ impl MeshReport {
 
 /// Runs `aortagen mesh`.
 pub fn run(args: MeshArgs) -> anyhow::Result<()> {
+    simulate::check_stray(&args.simulation)?;
     let file = args.file.display().to_string();
     let loaded = load_mesh_file(&args.file)?;
     let report = MeshReport::new(&file, &loaded);
@@ -175,17 +181,28 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         std::fs::write(out, &bytes).with_context(|| format!("cannot write {}", out.display()))?;
         written = Some((out.display().to_string(), format, bytes.len()));
     }
+    let simulation = if args.simulation.wanted() {
+        Some(simulate::write(&args.file, &loaded, &args.simulation)?)
+    } else {
+        None
+    };
     if args.json {
         let mut value = serde_json::to_value(&report)?;
         if let Some((path, format, bytes)) = &written {
             value["converted_to"] =
                 serde_json::json!({ "file": path, "format": format, "bytes": bytes });
         }
+        if let Some(sim) = &simulation {
+            value["simulation"] = serde_json::to_value(sim)?;
+        }
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
         println!("{}", report.to_text());
         if let Some((path, format, bytes)) = &written {
             println!("converted to:         {path} ({format}, {bytes} bytes)");
+        }
+        if let Some(sim) = &simulation {
+            println!("{}", simulate::to_text(sim));
         }
     }
     Ok(())

@@ -12,6 +12,7 @@ pub mod progress;
 pub mod render;
 pub mod report;
 pub mod serve;
+pub mod simulate;
 pub mod synth;
 pub mod train;
 

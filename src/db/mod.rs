@@ -9,6 +9,7 @@ pub mod job_changes;
 pub mod jobs;
 pub mod models;
 pub mod shapes;
+pub mod simulations;
 pub mod states;
 pub mod thumbnails;
 

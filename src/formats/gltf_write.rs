@@ -177,7 +177,7 @@ fn document(
     Ok(root)
 }
 
-fn accessor(
+pub(super) fn accessor(
     view: json::Index<json::buffer::View>,
     count: usize,
     type_: json::accessor::Type,
@@ -202,7 +202,7 @@ fn accessor(
 }
 
 /// Component-wise min and max of the positions (exact f32 values, as the spec requires).
-fn bounds(points: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+pub(super) fn bounds(points: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     let mut min = [f32::INFINITY; 3];
     let mut max = [f32::NEG_INFINITY; 3];
     for p in points {
@@ -215,7 +215,7 @@ fn bounds(points: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
 }
 
 /// Standard base64 with padding (RFC 4648 §4).
-fn base64(bytes: &[u8]) -> String {
+pub(super) fn base64(bytes: &[u8]) -> String {
     const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for chunk in bytes.chunks(3) {

@@ -1,5 +1,6 @@
 //! Mesh file formats: reading STL, OBJ, PLY and glTF/GLB into a [`TriMesh`] and writing
-//! GLB, glTF, STL, OBJ and PLY.
+//! GLB, glTF, STL, OBJ and PLY; face-labelled surfaces (a face id per triangle) are written
+//! as VTP, legacy VTK, multi-solid STL, grouped OBJ and per-face GLB.
 //!
 //! Every read ends with [`TriMesh::validate`], so a mesh that comes out of this module is
 //! safe to measure and sample. Every failure is a [`FormatError`] naming the file, the
@@ -10,20 +11,28 @@
 mod error;
 mod format;
 mod gltf;
+mod gltf_faces;
 mod gltf_write;
+mod labelled;
+#[cfg(test)]
+mod labelled_tests;
 pub mod mesh_blob;
 mod metadata;
 mod obj;
 mod ply;
 mod stl;
 mod transform;
+mod vtk;
 
 use std::path::Path;
 
 pub use error::FormatError;
 pub use format::MeshFormat;
+pub use gltf_faces::write_faces_glb;
+pub use labelled::{FacePatch, LabelledWriteError, write_grouped_obj, write_multi_solid_stl};
 pub(crate) use metadata::units_in;
 pub use metadata::{COORDINATE_FRAME_NOTE, MeshMetadata, SIGN_CONVENTION_NOTE};
+pub use vtk::{write_legacy_vtk, write_vtp};
 
 use crate::geometry::TriMesh;
 

@@ -3,6 +3,7 @@
 
 pub mod access;
 pub mod anchors;
+pub mod cohort_meshes;
 pub mod cohorts;
 pub mod cross_site;
 pub mod dashboard;
@@ -20,6 +21,7 @@ pub mod openapi;
 pub mod reports;
 pub mod server;
 pub mod shapes;
+pub mod simulation_meshes;
 pub mod thumbnails;
 pub mod upload_archive;
 
@@ -62,6 +64,8 @@ pub struct AppState {
     pub mesh_cache: Arc<mesh_cache::MeshCache>,
     /// The readiness probe's write, shared by concurrent `/readyz` calls.
     pub readiness: Arc<health::ReadinessProbe>,
+    /// Simulation meshes being made: bounded, deduplicated, stored.
+    pub simulations: Arc<crate::jobs::simulation::SimulationWork>,
 }
 
 /// Every documented route, with its OpenAPI description.
@@ -74,6 +78,8 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(anchors::router())
         .merge(cohorts::router())
         .merge(shapes::router())
+        .merge(simulation_meshes::router())
+        .merge(cohort_meshes::router())
         .merge(jobs::router())
         .merge(reports::router())
         .merge(thumbnails::router())

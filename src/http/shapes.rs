@@ -14,6 +14,7 @@ use super::cohorts::{load as load_cohort, page};
 use super::error::{ApiError, Problem, Result};
 use super::extractors::{ApiQuery, parse_id};
 use super::mesh_cache::MeshKey;
+use super::simulation_meshes::{self, SimulationQuery, param_error};
 use crate::anatomy::shape::ShapeAnatomy;
 use crate::cohort::seeds::SEED_SCHEME;
 use crate::cohort::{AnchorShare, ShapeProvenance};
@@ -21,6 +22,7 @@ use crate::db::{self, shapes::ShapeRow};
 use crate::formats::mesh_blob;
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
 use crate::geometry::normalize::UnitBallTransform;
+use crate::simulation::MeshRequest;
 use crate::telemetry::spawn_blocking_with_span;
 
 /// A generated shape with its provenance.
@@ -68,6 +70,16 @@ pub struct ShapeView {
     pub anatomy: Option<ShapeAnatomy>,
     /// Why the shape could not be measured as an aortic root nor as a vessel.
     pub anatomy_error: Option<String>,
+    /// Face table of the capped simulation mesh with default options (wall, inlet,
+    /// outlets: area, centroid, outward normal, equivalent diameter, perimeter), once it
+    /// has been made by a download or `faces_url`; null before (and in shape lists).
+    #[schema(value_type = Option<Vec<Object>>)]
+    pub faces: Option<serde_json::Value>,
+    /// Why no simulation mesh could be made with default options, when that was tried.
+    pub faces_error: Option<String>,
+    /// The face table and sidecar, made on request (add simulation parameters as for
+    /// `mesh_url`).
+    pub faces_url: String,
 }
 
 /// The model, training shapes, weights, seeds and resolution a shape came from (the record
@@ -145,6 +157,9 @@ impl ShapeView {
             novelty_met: s.novelty_met,
             anatomy: s.anatomy.map(|a| a.0),
             anatomy_error: s.anatomy_error,
+            faces: None,
+            faces_error: None,
+            faces_url: format!("/v1/shapes/{}/faces", s.shape_id),
         }
     }
 }
@@ -194,7 +209,8 @@ async fn list_cohort_shapes(
     Ok(Json(ShapePage { items, next_offset }))
 }
 
-/// One shape: provenance, counts, area, volume, units.
+/// One shape: provenance, counts, area, volume, units, and the face table of its
+/// simulation mesh once made.
 #[utoipa::path(get, path = "/v1/shapes/{id}", tag = "shapes",
     params(("id" = i64, Path, description = "Shape id")),
     responses((status = 200, body = ShapeView),
@@ -206,40 +222,68 @@ async fn get_shape(
     let row = db::shapes::get(&state.pool, parse_id("shape", &id)?)
         .await?
         .ok_or_else(|| ApiError::not_found("shape", &id))?;
-    Ok(Json(ShapeView::from_row(row)))
+    let (faces, faces_error) = simulation_meshes::stored_faces(&state, &row).await?;
+    Ok(Json(ShapeView {
+        faces,
+        faces_error,
+        ..ShapeView::from_row(row)
+    }))
 }
 
 /// Download options.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
 pub struct MeshQuery {
-    /// glb (default), gltf, stl, obj or ply.
+    /// glb (default), gltf, stl, obj or ply for the closed surface; vtp (default), vtk,
+    /// stl (one solid per face), obj (one group per face) or glb (one primitive per face)
+    /// with `openings=capped|open`.
+    #[param(value_type = Option<DownloadFormat>)]
     pub format: Option<String>,
-    /// mm (default) or unit (the shape's unit ball).
+    /// mm (default) or unit (the shape's unit ball; closed surface only).
     pub units: Option<String>,
 }
 
-/// The shape's mesh. Content never changes for a shape id: strong ETag, immutable caching.
+/// Every `format` of a download.
+#[derive(Debug, Clone, Copy, Serialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum DownloadFormat {
+    /// Binary glTF (one primitive per face for simulation meshes).
+    Glb,
+    /// glTF with embedded buffers (closed surface).
+    Gltf,
+    /// Binary STL (one named solid per face, ASCII, for simulation meshes).
+    Stl,
+    /// Wavefront OBJ (one group per face for simulation meshes).
+    Obj,
+    /// Binary PLY (closed surface).
+    Ply,
+    /// VTK XML PolyData with a `ModelFaceID` cell array (simulation meshes).
+    Vtp,
+    /// Legacy VTK PolyData with `ModelFaceID` (simulation meshes).
+    Vtk,
+}
+
+/// The shape's mesh: the closed surface as generated (content never changes for a shape
+/// id: strong ETag, immutable caching), or with `openings=capped|open` its simulation mesh,
+/// labelled per face, made once per shape and options (seconds with remeshing) and then
+/// read back.
 #[utoipa::path(get, path = "/v1/shapes/{id}/mesh", tag = "shapes",
-    params(("id" = i64, Path, description = "Shape id"), MeshQuery),
-    responses((status = 200, description = "The mesh in the requested format (model/gltf-binary by default)",
-               content(("model/gltf-binary"), ("model/gltf+json"), ("model/stl"), ("model/obj"), ("application/x-ply"))),
+    params(("id" = i64, Path, description = "Shape id"), MeshQuery, SimulationQuery),
+    responses((status = 200, description = "The mesh in the requested format (model/gltf-binary by default; vtp for simulation meshes)",
+               content(("model/gltf-binary"), ("model/gltf+json"), ("model/stl"), ("model/obj"), ("application/x-ply"), ("application/vnd.vtk.vtp+xml"), ("application/vnd.vtk"))),
               (status = 304, description = "Matches If-None-Match"),
-              (status = 400, body = Problem, content_type = "application/problem+json", description = "Unknown format or units"),
-              (status = 404, body = Problem, content_type = "application/problem+json")))]
+              (status = 400, body = Problem, content_type = "application/problem+json", description = "Unknown format, units or openings, a parameter out of range, or a simulation parameter for the closed surface; `field` names it"),
+              (status = 404, body = Problem, content_type = "application/problem+json"),
+              (status = 422, body = Problem, content_type = "application/problem+json", description = "No simulation mesh for this shape (openings not found, a cut missing the surface); `field` names the parameter to change, or `openings`"),
+              (status = 503, body = Problem, content_type = "application/problem+json", description = "Too many simulation meshes being made; retry after Retry-After")))]
 async fn get_shape_mesh(
     State(state): State<AppState>,
     Path(id): Path<String>,
     ApiQuery(q): ApiQuery<MeshQuery>,
+    ApiQuery(sim): ApiQuery<SimulationQuery>,
     headers: HeaderMap,
 ) -> Result<Response> {
-    let format: MeshFormat = match q.format.as_deref() {
-        None => MeshFormat::Glb,
-        Some(f) => f.parse().map_err(|_| ApiError::BadRequest {
-            field: Some("format".into()),
-            message: format!("unknown mesh format {f:?}; use glb, gltf, stl, obj or ply"),
-        })?,
-    };
+    let request = MeshRequest::parse(q.format.as_deref(), &sim.params()).map_err(param_error)?;
     let units = match q.units.as_deref() {
         None | Some("mm") => "mm",
         Some("unit") => "unit",
@@ -255,6 +299,18 @@ async fn get_shape_mesh(
     let shape = db::shapes::get(&state.pool, shape_id)
         .await?
         .ok_or_else(|| ApiError::not_found("shape", &id))?;
+    let format = match request {
+        MeshRequest::Closed(format) => format,
+        MeshRequest::Simulation { .. } if units != "mm" => {
+            return Err(ApiError::BadRequest {
+                field: Some("units".into()),
+                message: "simulation meshes are written in mm".into(),
+            });
+        }
+        MeshRequest::Simulation { format, request } => {
+            return simulation_meshes::download(&state, shape, format, request, &headers).await;
+        }
+    };
     let etag = format!(
         "\"{}-{}-{units}\"",
         &shape.mesh_sha256[..32],
@@ -296,7 +352,7 @@ async fn get_shape_mesh(
 const CACHE_FOREVER: &str = "public, max-age=31536000, immutable";
 
 /// Reads the stored unit-ball mesh and writes it in `format` and `units`, off the executor.
-async fn encode_mesh(
+pub(super) async fn encode_mesh(
     state: &AppState,
     shape: ShapeRow,
     format: MeshFormat,

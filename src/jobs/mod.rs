@@ -8,6 +8,7 @@ pub mod fit;
 pub mod priority;
 pub mod queue;
 pub mod setup;
+pub mod simulation;
 pub mod stats;
 pub mod training;
 pub mod worker;

@@ -3,11 +3,13 @@
 //! (smooth with the mesh's vertex normals, flat without),
 //! several meshes side by side at one common scale, written as PNG.
 
+mod labelled;
 mod png_out;
 mod raster;
 
 use crate::geometry::TriMesh;
 use crate::geometry::mesh::{cross, dot, normalized};
+pub use labelled::{face_colour, render_labelled};
 pub use png_out::encode_png;
 use raster::{Canvas, Material, ScreenTriangle, face_normal};
 

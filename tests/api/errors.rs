@@ -309,7 +309,7 @@ async fn an_unknown_mesh_format_or_unit_is_a_400_naming_the_parameter() {
     app.run_pending_jobs().await;
     let shapes = app.get(&format!("/v1/cohorts/{id}/shapes")).await.json();
     let shape = shapes["items"][0]["id"].as_i64().unwrap();
-    for (query, field) in [("format=vtk", "format"), ("units=inch", "units")] {
+    for (query, field) in [("format=step", "format"), ("units=inch", "units")] {
         let r = app.get(&format!("/v1/shapes/{shape}/mesh?{query}")).await;
         assert_eq!(r.status, StatusCode::BAD_REQUEST, "{query}");
         assert_eq!(r.json()["field"], field);

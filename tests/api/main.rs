@@ -25,4 +25,5 @@ mod process;
 mod reports;
 mod science;
 mod shapes;
+mod simulation;
 mod storage;

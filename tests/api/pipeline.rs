@@ -107,6 +107,7 @@ impl Request {
             out: out.to_path_buf(),
             backend: Backend::default(),
             extraction: ExtractionMethod::Fast,
+            simulation: Default::default(),
         }
     }
 }

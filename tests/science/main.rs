@@ -12,6 +12,7 @@ mod formats;
 mod marching_cubes;
 mod proptest_cohort_request;
 mod report_cli;
+mod simulation_cli;
 mod synth_cli;
 mod synth_intersect;
 mod synth_params;

@@ -118,6 +118,7 @@ fn generate(model: &Path, out: &Path, units: Units) {
         out: out.to_path_buf(),
         backend: Backend::default(),
         extraction: ExtractionMethod::Fast,
+        simulation: Default::default(),
     })
     .unwrap();
 }

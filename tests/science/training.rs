@@ -617,6 +617,7 @@ mod cohort {
             out: out.path().to_path_buf(),
             backend: Backend::Flex,
             extraction: ExtractionMethod::Fast,
+            simulation: Default::default(),
         })?;
         Ok(out)
     }
