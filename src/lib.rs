@@ -16,13 +16,20 @@ pub mod formats;
 pub mod geometry;
 pub mod http;
 pub mod jobs;
+/// Density models of training latents (PCA Gaussian, PCA mixture) that draw new latents.
+pub mod latent_models;
 pub mod render;
 pub mod report;
 pub mod sdf;
+/// Shape-level cohort metrics (MMD, COV, 1-NNA, DCR) on precomputed distance matrices.
+pub mod shape_metrics;
 pub mod simulation;
 pub mod startup;
+/// Population statistics for validating a virtual cohort against a real one.
+pub mod stats;
 pub mod synth;
 pub mod telemetry;
+pub mod validation;
 
 /// Software version recorded in every artefact's provenance.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -10,13 +10,16 @@ use crate::geometry::TriMesh;
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
 use crate::render::{View, encode_png, render_meshes};
 use crate::sdf::backend::Backend;
-use crate::sdf::data::{DataSource, load_source_meshes};
+use crate::sdf::data::DataSource;
+use crate::sdf::data::holdout::load_split;
 use crate::sdf::inference::evaluation::{
-    CHAMFER_UNITS, EvaluationReport, EvaluationSettings, evaluate_model,
+    CHAMFER_UNITS, EvaluationReport, EvaluationSettings, HeldOutEvaluation, evaluate_model,
 };
 use crate::sdf::inference::reconstruct::{EVALUATION_RESOLUTION, reconstruct};
 use crate::sdf::inference::reconstruct::{ExtractionMethod, MAX_RESOLUTION, MIN_RESOLUTION};
 use crate::sdf::store::LoadedModel;
+use crate::sdf::training::fit::DEFAULT_FIT_ITERATIONS;
+use crate::sdf::training::heldout::evaluate_heldout;
 
 /// Reconstruct each training shape from its latent and compare it with the original.
 #[derive(Debug, clap::Args)]
@@ -46,6 +49,10 @@ pub struct EvaluateArgs {
     /// How many of the worst shapes --worst shows.
     #[arg(long, default_value_t = 3)]
     pub worst_count: usize,
+    /// Adam steps of each held-out shape's fit (models trained with --holdout; 0 skips
+    /// the held-out shapes).
+    #[arg(long, default_value_t = DEFAULT_FIT_ITERATIONS)]
+    pub heldout_iterations: usize,
     /// Compute backend.
     #[arg(long, default_value = "flex")]
     pub backend: Backend,
@@ -68,10 +75,8 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         Some(path) => DataSource::Directory { path: path.clone() },
         None => model.manifest.data.source.clone(),
     };
-    let originals: Vec<_> = load_source_meshes(&source)?
-        .into_iter()
-        .map(|(_, mesh)| mesh)
-        .collect();
+    let split = load_split(&source, model.manifest.data.holdout.as_ref())?;
+    let originals: Vec<_> = split.training.into_iter().map(|(_, mesh)| mesh).collect();
     let settings = EvaluationSettings {
         resolution: args.resolution,
         chamfer_points: args.points,
@@ -91,6 +96,10 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
     })?;
     if let Some(bar) = bar {
         bar.finish_and_clear();
+    }
+    let mut report = report;
+    if !split.heldout.is_empty() && args.heldout_iterations > 0 {
+        report.heldout = Some(fit_heldout(&model, &split.heldout, &args, &settings));
     }
     print_summary(&report);
     if let Some(path) = &args.json {
@@ -114,6 +123,36 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Fits the held-out shapes with the network frozen, with a progress bar or log lines.
+fn fit_heldout(
+    model: &LoadedModel,
+    heldout: &[(String, TriMesh)],
+    args: &EvaluateArgs,
+    settings: &EvaluationSettings,
+) -> HeldOutEvaluation {
+    let bar = terminal_bar(heldout.len() as u64, "held-out fits");
+    let evaluation = evaluate_heldout(
+        model,
+        heldout,
+        args.heldout_iterations,
+        settings,
+        None,
+        &mut |shape, _| match (&bar, shape.chamfer) {
+            (Some(bar), _) => bar.inc(1),
+            (None, Some(cd)) => {
+                tracing::info!(shape = %shape.name, chamfer = cd, "held-out shape fitted")
+            }
+            (None, None) => {
+                tracing::warn!(shape = %shape.name, error = ?shape.error, "held-out fit failed")
+            }
+        },
+    );
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    evaluation
 }
 
 /// Writes the `count` shapes of largest Chamfer distance, worst first, as
@@ -213,6 +252,20 @@ fn print_summary(report: &EvaluationReport) {
         "  sampling floor (two samplings of the same original, median): {:.3e}",
         report.sampling_floor_median
     );
+    if let Some(h) = &report.heldout {
+        println!(
+            "held-out shapes ({}, fitted with the network frozen, {} steps):",
+            h.shapes.len(),
+            h.iterations
+        );
+        match &h.summary {
+            Some(q) => println!(
+                "  median {:.3e}  mean {:.3e}  q25 {:.3e}  q75 {:.3e}  max {:.3e}; floor {:.3e}",
+                q.median, q.mean, q.q25, q.q75, q.max, h.sampling_floor_median
+            ),
+            None => println!("  no held-out shape could be fitted"),
+        }
+    }
     if report.failures > 0 {
         println!("  {} shapes gave no surface:", report.failures);
         for shape in report.shapes.iter().filter(|s| s.chamfer.is_none()) {

@@ -15,8 +15,8 @@ use crate::cohort::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, parse_target_a
 use crate::cohort::weights::parse_weights;
 use crate::cohort::{
     CohortFields, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape,
-    DEFAULT_RESOLUTION, EngineHandle, RequestError, RequestLimits, Selection, ShapeRecord,
-    Weighting,
+    DEFAULT_RESOLUTION, EngineHandle, ModelLatents, RequestError, RequestLimits, SamplerFields,
+    SamplerKind, Selection, ShapeRecord, Weighting,
 };
 use crate::engine::{AnchorLatent, Engine, SdfEngine};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
@@ -51,9 +51,13 @@ pub struct GenerateArgs {
     /// Model directory written by `aortagen train`.
     #[arg(long)]
     pub model: PathBuf,
-    /// Shapes combined per generated shape, anchors included (k ≥ 2).
+    /// Shapes combined per generated shape, anchors included (k ≥ 2; required by the convex
+    /// sampler; with a density sampler 1 + the anchors, and may be left out).
     #[arg(long)]
-    pub arity: usize,
+    pub arity: Option<usize>,
+    /// How latents are drawn.
+    #[command(flatten)]
+    pub sampler: SamplerArgs,
     /// Fixed weights, comma-separated (k values ≥ 0 summing to 1).
     #[arg(long)]
     pub weights: Option<String>,
@@ -122,6 +126,51 @@ pub struct GenerateArgs {
     pub simulation: GenerateSimulation,
 }
 
+/// The sampler flags of `aortagen generate`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct SamplerArgs {
+    /// How latents are drawn: `convex` combinations of --arity training latents, or a
+    /// density model of the training latents and their transforms: `pca-gaussian` (a
+    /// Gaussian in the principal components) or `pca-mixture` (a Gaussian mixture on the
+    /// leading whitened components).
+    #[arg(long = "sampler", value_enum, default_value = "convex")]
+    pub kind: SamplerKind,
+    /// pca-gaussian: truncate each mode's normal variate at ±C (redrawn beyond).
+    #[arg(long, value_name = "C")]
+    pub truncation: Option<f64>,
+    /// pca-gaussian: scale on every mode's standard deviation (default 1).
+    #[arg(long)]
+    pub sigma_scale: Option<f64>,
+    /// Density samplers: keep the fewest modes explaining this share of the variance (0–1].
+    #[arg(long)]
+    pub variance_share: Option<f64>,
+    /// pca-mixture: exactly this many components.
+    #[arg(long)]
+    pub components: Option<i64>,
+    /// pca-mixture: choose the components by BIC from 1 to this many (default 4).
+    #[arg(long)]
+    pub max_components: Option<i64>,
+    /// pca-mixture: leading principal modes the mixture models (default 4).
+    #[arg(long)]
+    pub mixture_modes: Option<i64>,
+}
+
+impl SamplerArgs {
+    /// The request's `sampler` (none for the default convex sampler without parameters).
+    pub fn fields(&self) -> Option<SamplerFields> {
+        let fields = SamplerFields {
+            kind: self.kind,
+            truncation: self.truncation,
+            sigma_scale: self.sigma_scale,
+            variance_share: self.variance_share,
+            components: self.components,
+            max_components: self.max_components,
+            mixture_modes: self.mixture_modes,
+        };
+        (fields != SamplerFields::default()).then_some(fields)
+    }
+}
+
 fn parse_format(s: &str) -> Result<MeshFormat, String> {
     s.parse::<MeshFormat>().map_err(|e| e.to_string())
 }
@@ -136,7 +185,8 @@ impl GenerateArgs {
         let targeted = !self.targets.is_empty();
         Ok(CohortFields {
             count: i64::try_from(self.count).unwrap_or(i64::MAX),
-            arity: i64::try_from(self.arity).unwrap_or(i64::MAX),
+            arity: self.arity.map(|a| i64::try_from(a).unwrap_or(i64::MAX)),
+            sampler: self.sampler.fields(),
             weights,
             weighting: Some(self.weighting),
             seed: Some(self.seed),
@@ -157,6 +207,10 @@ fn flag_error(e: RequestError) -> anyhow::Error {
     let flag = match field.split(['.', '[']).next().unwrap_or(field) {
         "targets" => "--target".to_owned(),
         "anchors" => "--anchor".to_owned(),
+        "sampler" => match field.split_once('.') {
+            Some((_, parameter)) => format!("--{}", parameter.replace('_', "-")),
+            None => "--sampler".to_owned(),
+        },
         name => format!("--{}", name.replace('_', "-")),
     };
     anyhow::anyhow!("{flag}: {} (rule {})", e.message, e.rule)
@@ -191,11 +245,18 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     );
     let setup = CohortSetup::compute(&*engine, &args.model, &request, count, &cancel)?;
     print_target_ranges(&request, &setup);
-    let latents = match request.selection.needs_latents() {
-        true => Some(Arc::new(engine.training_latents(&args.model)?)),
-        false => None,
-    };
-    let plan = CohortPlan::new(&request, count, latents, anchors);
+    let latents = ModelLatents::read(&*engine, &args.model, &request, count)?;
+    let plan = CohortPlan::new(&request, count, latents.as_ref(), anchors)?;
+    if let Some(sampler) = &plan.sampler {
+        let s = sampler.summary();
+        println!(
+            "sampler {}: {} modes ({:.1} % of the variance), {} component(s)",
+            args.sampler.kind.name(),
+            s.modes,
+            100.0 * s.explained_share,
+            s.components
+        );
+    }
     let handle = EngineHandle {
         engine,
         model_dir: args.model.clone(),

@@ -15,6 +15,7 @@ pub mod serve;
 pub mod simulate;
 pub mod synth;
 pub mod train;
+pub mod validate;
 
 /// Generative models of aortic shapes and synthetic cohorts for in-silico trials.
 #[derive(Debug, Parser)]
@@ -50,6 +51,9 @@ pub enum Command {
     Report(report::ReportArgs),
     /// Compare the diversity and novelty of generated cohorts side by side.
     Compare(compare::CompareArgs),
+    /// Validate a generated cohort against a real population (held-out or training shapes,
+    /// patient meshes, or a measurements table), with acceptance criteria.
+    Validate(validate::ValidateArgs),
 }
 
 /// Parses the process arguments and runs the chosen subcommand.
@@ -67,5 +71,6 @@ pub fn run() -> anyhow::Result<()> {
         Command::Measure(args) => measure::run(args),
         Command::Report(args) => report::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::Validate(args) => validate::run(args),
     }
 }

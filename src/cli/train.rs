@@ -9,6 +9,7 @@ use indicatif::ProgressBar;
 use super::progress::{init_logging, terminal_bar};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::DataSource;
+use crate::sdf::data::holdout::HoldoutSpec;
 use crate::sdf::store::manifest::EpochLoss;
 use crate::sdf::training::{
     Preset, StepReport, TrainingObserver, TrainingRequest, TrainingSetup, train,
@@ -57,6 +58,13 @@ pub struct TrainArgs {
     /// Seed of the sampling, the initial weights and every batch.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Keep K of the source shapes out of training (chosen from --holdout-seed), for
+    /// held-out evaluation and validation; the manifest records which.
+    #[arg(long, value_name = "K")]
+    pub holdout: Option<usize>,
+    /// Seed of the held-out choice (default: --seed).
+    #[arg(long, requires = "holdout")]
+    pub holdout_seed: Option<u64>,
     /// Continue the checkpoint in --out.
     #[arg(long)]
     pub resume: bool,
@@ -94,6 +102,14 @@ impl TrainArgs {
         setup
     }
 
+    /// The held-out part, if asked for.
+    pub fn holdout(&self) -> Option<HoldoutSpec> {
+        self.holdout.map(|count| HoldoutSpec {
+            count,
+            seed: self.holdout_seed.unwrap_or(self.seed),
+        })
+    }
+
     fn source(&self) -> DataSource {
         match (&self.data, self.synth) {
             (Some(path), _) => DataSource::Directory { path: path.clone() },
@@ -124,6 +140,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let request = TrainingRequest {
         out_dir: args.out.clone(),
         source: args.source(),
+        holdout: args.holdout(),
         setup: args.setup(),
         backend: args.backend,
         resume: args.resume,
@@ -136,6 +153,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     let m = &outcome.manifest;
     let last = m.loss_history.last().map_or(f64::NAN, |l| l.total);
+    if let Some(h) = &m.data.holdout {
+        let names: Vec<&str> = h.shapes.iter().map(|s| s.name.as_str()).collect();
+        println!("held out {} shapes: {}", names.len(), names.join(", "));
+    }
     if outcome.finished {
         println!(
             "trained {} shapes for {} epochs (final loss {last:.5}); model {} in {}",

@@ -12,6 +12,7 @@ use anyhow::Context;
 use super::plan::CohortPlan;
 use super::record::{AnchorShare, CohortShape, ShapeProvenance};
 use super::request::{CohortRequest, TargetSearch};
+use super::sampler::SamplerFields;
 use super::seeds::SEED_SCHEME;
 use super::targets::feasibility::{
     SCREEN_RESOLUTION, TrainingAnatomy, check_feasible, measure_mm, measure_training_shapes,
@@ -77,6 +78,7 @@ pub struct CohortGenerator {
     model_id: String,
     plan: CohortPlan,
     min_novelty: Option<f64>,
+    sampler: Option<SamplerFields>,
     reference: Arc<NoveltyReference>,
     targeting: Option<Targeting>,
     cancel: Arc<AtomicBool>,
@@ -118,6 +120,7 @@ impl CohortGenerator {
             model_id: handle.model_id,
             plan,
             min_novelty: request.min_novelty,
+            sampler: request.sampler.recorded(),
             reference: setup.reference,
             targeting,
             cancel: handle.cancel,
@@ -284,7 +287,7 @@ impl CohortGenerator {
         searched: Option<Searched>,
     ) -> CohortShape {
         let plan = &self.plan;
-        let k = draw.spec.training_indices.len();
+        let k = draw.spec.drawn_members();
         let provenance = ShapeProvenance {
             model_id: self.model_id.clone(),
             training_indices: draw.spec.training_indices.clone(),
@@ -309,6 +312,7 @@ impl CohortGenerator {
             attempt: i64::from(draw.attempt),
             candidates: searched.map(|s| i64::from(s.candidates)),
             targets_met: searched.map(|s| s.met),
+            sampler: self.sampler.clone(),
         };
         CohortShape {
             index,
@@ -386,20 +390,23 @@ impl CandidateSource for ShapeCandidates<'_> {
     type Error = CohortError;
 
     /// The plan's draw of that attempt, its training shapes taken from the guided pool on
-    /// guided attempts, with the anchors forced in.
+    /// guided attempts, with the anchors forced in. A density sampler's candidates are all
+    /// plain draws: there are no training shapes to guide.
     fn draw(&mut self, attempt: u32) -> Result<ShapeSpec, CohortError> {
         let plan = &self.generator.plan;
         let mut spec = plan.draw(self.index, attempt);
-        if is_guided(attempt) && self.targeting.pool.len() >= plan.arity {
+        let convex = plan.sampler.is_none();
+        if convex && is_guided(attempt) && self.targeting.pool.len() >= plan.arity {
             spec.training_indices = guided_indices(spec.seed, &self.targeting.pool, plan.arity);
         }
         Ok(plan.with_anchors(spec))
     }
 
-    /// Only drawn weights are refined; a refinement keeps its draw's seed (and so its
-    /// latent noise): only the weights change.
+    /// Only drawn weights of training shapes are refined; a refinement keeps its draw's
+    /// seed (and so its latent noise): only the weights change.
     fn refine(&mut self, spec: &ShapeSpec, measured: &ShapeAnatomy) -> Option<ShapeSpec> {
-        if !self.generator.plan.weights.is_drawn() {
+        let plan = &self.generator.plan;
+        if !plan.weights.is_drawn() || plan.sampler.is_some() {
             return None;
         }
         let t = self.targeting;

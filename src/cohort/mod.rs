@@ -14,6 +14,7 @@ pub mod generator;
 pub mod plan;
 pub mod record;
 pub mod request;
+pub mod sampler;
 pub mod seeds;
 pub mod selection;
 pub mod targets;
@@ -22,9 +23,10 @@ pub mod weights;
 use std::ops::RangeInclusive;
 
 pub use generator::{CohortGenerator, CohortSetup, EngineHandle};
-pub use plan::CohortPlan;
+pub use plan::{CohortPlan, ModelLatents};
 pub use record::{AnchorShare, CohortShape, ShapeProvenance, ShapeRecord};
 pub use request::{CohortFields, CohortRequest, RequestError, RequestLimits, TargetSearch};
+pub use sampler::{SamplerChoice, SamplerFields, SamplerKind};
 pub use selection::Selection;
 pub use targets::Targets;
 pub use targets::feasibility::Infeasible;
@@ -54,6 +56,9 @@ pub enum CohortError {
     /// A target the model's training shapes cannot reach.
     #[error("targets: {0}")]
     Infeasible(Infeasible),
+    /// The density sampler cannot be fitted to the model's training latents.
+    #[error("sampler: cannot be fitted to the training latents: {0}")]
+    Sampler(crate::latent_models::LatentModelError),
     /// One shape could not be generated.
     #[error("shape {index}: {error:#}")]
     Shape {

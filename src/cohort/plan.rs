@@ -1,17 +1,68 @@
 //! How a cohort turns into per-shape specifications: which training shapes each draw mixes
-//! (and which fitted anchors), with which weights, all derived from the cohort seed by the
-//! [`seeds`](super::seeds) scheme so a cohort can be replayed bit for bit.
+//! (or which latent a density sampler draws), which fitted anchors, with which weights, all
+//! derived from the cohort seed by the [`seeds`](super::seeds) scheme so a cohort can be
+//! replayed bit for bit.
 
+use std::path::Path;
 use std::sync::Arc;
 
+use anyhow::Context;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use super::CohortError;
 use super::request::CohortRequest;
+use super::sampler::SamplerChoice;
+use super::sampler::joint::JointSampler;
 use super::seeds::{attempt_seed, shape_seed};
 use super::selection::{Selection, choose_distinct, select_spread};
 use super::weights::WeightChoice;
-use crate::engine::{AnchorLatent, ShapeSpec};
+use crate::engine::{AnchorLatent, Engine, ShapeSpec};
+use crate::geometry::normalize::UnitBallTransform;
+
+/// The model's training latents (and, for density samplers, their transforms), which
+/// spread selection picks from and density samplers are fitted to.
+#[derive(Debug, Clone)]
+pub struct ModelLatents {
+    /// Latents in training-index order.
+    pub latents: Arc<Vec<Vec<f32>>>,
+    /// Their unit-ball transforms (empty unless read for a density sampler).
+    pub transforms: Vec<UnitBallTransform>,
+}
+
+impl ModelLatents {
+    /// What `request` needs of the model in `model_dir` (none when it needs nothing),
+    /// checked to cover its `count` training shapes.
+    pub fn read<A>(
+        engine: &dyn Engine,
+        model_dir: &Path,
+        request: &CohortRequest<A>,
+        count: usize,
+    ) -> anyhow::Result<Option<Self>> {
+        let density = !request.sampler.is_convex();
+        if !(density || request.selection.needs_latents()) {
+            return Ok(None);
+        }
+        let latents = engine
+            .training_latents(model_dir)
+            .context("cannot read the training latents")?;
+        anyhow::ensure!(
+            latents.len() == count,
+            "the engine returned {} latents for {count} training shapes",
+            latents.len()
+        );
+        let transforms = match density {
+            false => Vec::new(),
+            true => engine
+                .training_transforms(model_dir)
+                .context("cannot read the training transforms")?,
+        };
+        Ok(Some(Self {
+            latents: Arc::new(latents),
+            transforms,
+        }))
+    }
+}
 
 /// Everything needed to derive every draw of every shape of a cohort.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,19 +85,36 @@ pub struct CohortPlan {
     pub latents: Option<Arc<Vec<Vec<f32>>>>,
     /// Fitted anchors forced into every shape, in the request's order.
     pub anchors: Vec<AnchorLatent>,
+    /// The density sampler drawing each shape's latent (none: convex combinations).
+    pub sampler: Option<Arc<JointSampler>>,
 }
 
 impl CohortPlan {
     /// The plan of `request` on a model with `training_shapes` shapes (the request's rules
     /// against the model hold: see [`CohortRequest::check_model`]); `latents` are the
     /// training latents when the selection needs them, `anchors` the request's anchors.
+    ///
+    /// A density sampler is fitted here, to `model`'s latents and transforms: a pure function
+    /// of them, so the command line and a resumed job fit the same sampler.
     pub fn new<A>(
         request: &CohortRequest<A>,
         training_shapes: usize,
-        latents: Option<Arc<Vec<Vec<f32>>>>,
+        model: Option<&ModelLatents>,
         anchors: Vec<AnchorLatent>,
-    ) -> Self {
-        Self {
+    ) -> Result<Self, CohortError> {
+        let sampler = match (&request.sampler, model) {
+            (SamplerChoice::Convex, _) => None,
+            (SamplerChoice::Density(config), Some(m)) => Some(Arc::new(
+                JointSampler::fit(config, &m.latents, &m.transforms)
+                    .map_err(CohortError::Sampler)?,
+            )),
+            (SamplerChoice::Density(_), None) => {
+                return Err(CohortError::Reference(anyhow::anyhow!(
+                    "a density sampler needs the training latents"
+                )));
+            }
+        };
+        Ok(Self {
             training_shapes,
             arity: request.arity,
             weights: request.weights.clone(),
@@ -54,9 +122,10 @@ impl CohortPlan {
             resolution: request.resolution,
             selection: request.selection,
             latent_noise: request.latent_noise,
-            latents,
+            latents: model.map(|m| m.latents.clone()),
             anchors,
-        }
+            sampler,
+        })
     }
 
     /// The specification of shape `index`; depends only on the plan and the index, so a
@@ -72,10 +141,22 @@ impl CohortPlan {
     }
 
     /// Draw `attempt` of shape `index` before the anchors are forced in: `arity` training
-    /// shapes and `arity` weights, from the draw's own seed.
+    /// shapes and `arity` weights, from the draw's own seed — or, with a density sampler,
+    /// the sampled latent (from the same seed, its own stream) and the weights.
     pub fn draw(&self, index: u64, attempt: u32) -> ShapeSpec {
         let seed = attempt_seed(shape_seed(self.seed, index), attempt);
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        if let Some(sampler) = &self.sampler {
+            return ShapeSpec {
+                training_indices: Vec::new(),
+                weights: self.weights.draw(&mut rng, self.arity),
+                seed,
+                resolution: self.resolution,
+                latent_noise: 0.0,
+                anchors: Vec::new(),
+                sampled: Some(sampler.draw(seed)),
+            };
+        }
         let training_indices = match (self.selection, &self.latents) {
             (Selection::Spread, Some(latents)) => select_spread(&mut rng, latents, self.arity),
             _ => choose_distinct(&mut rng, self.training_shapes, self.arity),
@@ -88,12 +169,13 @@ impl CohortPlan {
             resolution: self.resolution,
             latent_noise: self.latent_noise,
             anchors: Vec::new(),
+            sampled: None,
         }
     }
 
     /// Forces the plan's anchors into a draw: they take the places of its last training
     /// picks (and their weights), so the mixture still has `arity` members and every other
-    /// draw of the plan is unchanged.
+    /// draw of the plan is unchanged. A sampled latent keeps its place before them.
     pub fn with_anchors(&self, mut spec: ShapeSpec) -> ShapeSpec {
         if self.anchors.is_empty() {
             return spec;
@@ -124,6 +206,7 @@ mod tests {
             latent_noise: 0.0,
             latents: None,
             anchors: Vec::new(),
+            sampler: None,
         }
     }
 

@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::Selection;
+use super::sampler::SamplerFields;
 use crate::anatomy::shape::ShapeAnatomy;
 use crate::engine::{GeneratedShape, ShapeSpec};
 use crate::formats::mesh_blob;
@@ -71,6 +72,10 @@ pub struct ShapeProvenance {
     /// Whether the shape meets every target of its cohort (null without targets); false
     /// when no candidate did and the closest was kept.
     pub targets_met: Option<bool>,
+    /// The density sampler that drew the shape's latent, with every default filled in
+    /// (absent: a convex combination of training latents).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampler: Option<SamplerFields>,
 }
 
 fn first_scheme() -> u32 {

@@ -6,6 +6,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Display;
 
+use super::sampler::{SamplerChoice, SamplerFields};
 use super::targets::{DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, TargetError, TargetRange, Targets};
 use super::weights::{WeightChoice, WeightError, Weighting};
 use super::{DEFAULT_RESOLUTION, RESOLUTION_RANGE, Selection};
@@ -16,8 +17,9 @@ use super::{DEFAULT_RESOLUTION, RESOLUTION_RANGE, Selection};
 pub struct CohortFields<A> {
     /// Number of shapes.
     pub count: i64,
-    /// Shapes mixed per generated shape, anchors included.
-    pub arity: i64,
+    /// Shapes mixed per generated shape, anchors included (required by the convex sampler;
+    /// 1 + anchors with a density sampler).
+    pub arity: Option<i64>,
     /// Explicit weights (length = arity).
     pub weights: Option<Vec<f64>>,
     /// Weight strategy when `weights` is absent (default Dirichlet).
@@ -38,6 +40,8 @@ pub struct CohortFields<A> {
     pub max_candidates: Option<i64>,
     /// Fitted anchors forced into every shape.
     pub anchors: Option<Vec<A>>,
+    /// The sampler (absent: convex combinations).
+    pub sampler: Option<SamplerFields>,
 }
 
 /// Bounds the service configures on a request (the command line has none).
@@ -62,8 +66,11 @@ impl RequestLimits {
 pub struct CohortRequest<A> {
     /// Number of shapes (≥ 1).
     pub count: u32,
-    /// Shapes mixed per generated shape, anchors included (≥ 2).
+    /// Members mixed per generated shape, anchors included: training shapes (≥ 2 in all)
+    /// for the convex sampler, the sampled latent (1 + anchors) for a density sampler.
     pub arity: usize,
+    /// How each shape's latent is drawn.
+    pub sampler: SamplerChoice,
     /// Where each shape's weights come from.
     pub weights: WeightChoice,
     /// The seed (given, or drawn when the request was parsed).
@@ -141,11 +148,12 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
         draw_seed: impl FnOnce() -> u64,
     ) -> Result<Self, RequestError> {
         let count = check_count(fields.count, limits.max_count)?;
-        if fields.arity < 2 {
-            let msg = format!("must be at least 2, got {}", fields.arity);
-            return Err(RequestError::new("arity", "range", msg));
+        let sampler = SamplerChoice::parse(fields.sampler.as_ref())?;
+        let anchor_count = fields.anchors.as_ref().map_or(0, Vec::len);
+        let arity = check_arity(fields.arity, &sampler, anchor_count)?;
+        if !sampler.is_convex() {
+            check_convex_only(&fields)?;
         }
-        let arity = usize::try_from(fields.arity).unwrap_or(usize::MAX);
         let resolution = check_resolution(fields.resolution)?;
         check_budget(count, resolution, limits.max_voxels)?;
         let weighting = fields.weighting.unwrap_or_default();
@@ -160,6 +168,7 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
         Ok(Self {
             count,
             arity,
+            sampler,
             weights,
             seed: fields.seed.unwrap_or_else(draw_seed),
             resolution,
@@ -171,8 +180,18 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
         })
     }
 
-    /// The rule against the model: the arity within its training shapes.
+    /// The rules against the model: the arity within its training shapes, and a density
+    /// sampler's component count below them.
     pub fn check_model(&self, training_shapes: usize) -> Result<(), RequestError> {
+        if let SamplerChoice::Density(crate::latent_models::SamplerConfig::PcaMixture(m)) =
+            &self.sampler
+            && let crate::latent_models::mixture::ComponentCount::Fixed(k) = m.components
+            && k > training_shapes
+        {
+            let msg =
+                format!("must not exceed the model's {training_shapes} training shapes, got {k}");
+            return Err(RequestError::new("sampler.components", "range", msg));
+        }
         if self.arity > training_shapes {
             let msg = format!(
                 "must not exceed the model's {training_shapes} training shapes, got {}",
@@ -192,6 +211,53 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
             (None, None) => 1,
         }
     }
+}
+
+/// The arity: given and ≥ 2 for the convex sampler; 1 + anchors (given or not) for a
+/// density sampler.
+fn check_arity(
+    arity: Option<i64>,
+    sampler: &SamplerChoice,
+    anchors: usize,
+) -> Result<usize, RequestError> {
+    if !sampler.is_convex() {
+        let members = 1 + anchors;
+        return match arity {
+            None => Ok(members),
+            Some(a) if a == members as i64 => Ok(members),
+            Some(a) => {
+                let msg = format!(
+                    "with a density sampler each shape mixes its sampled latent and the \
+                     {anchors} anchors, so arity is {members} (or left out), got {a}"
+                );
+                Err(RequestError::new("arity", "range", msg))
+            }
+        };
+    }
+    match arity {
+        None => {
+            let msg = "is required by the convex sampler (training shapes mixed per shape)";
+            Err(RequestError::new("arity", "required", msg))
+        }
+        Some(a) if a < 2 => {
+            let msg = format!("must be at least 2, got {a}");
+            Err(RequestError::new("arity", "range", msg))
+        }
+        Some(a) => Ok(usize::try_from(a).unwrap_or(usize::MAX)),
+    }
+}
+
+/// Fields that only convex combinations have, refused with a density sampler.
+fn check_convex_only<A>(fields: &CohortFields<A>) -> Result<(), RequestError> {
+    let msg = "applies to the convex sampler only; a density sampler's spread is set by \
+               its own parameters";
+    if fields.selection == Some(Selection::Spread) {
+        return Err(RequestError::new("selection", "convex-only", msg));
+    }
+    if fields.latent_noise.is_some_and(|n| n != 0.0) {
+        return Err(RequestError::new("latent_noise", "convex-only", msg));
+    }
+    Ok(())
 }
 
 fn check_count(count: i64, max_count: u32) -> Result<u32, RequestError> {
@@ -293,7 +359,7 @@ mod tests {
     fn fields() -> CohortFields<i64> {
         CohortFields {
             count: 3,
-            arity: 2,
+            arity: Some(2),
             ..CohortFields::default()
         }
     }
@@ -345,11 +411,19 @@ mod tests {
             ),
             (
                 CohortFields {
-                    arity: 1,
+                    arity: Some(1),
                     ..fields()
                 },
                 "arity",
                 "range",
+            ),
+            (
+                CohortFields {
+                    arity: None,
+                    ..fields()
+                },
+                "arity",
+                "required",
             ),
             (
                 CohortFields {
@@ -450,9 +524,88 @@ mod tests {
     }
 
     #[test]
+    fn a_density_sampler_counts_its_latent_and_the_anchors_and_refuses_convex_fields() {
+        use crate::cohort::sampler::SamplerKind;
+        let gaussian = Some(SamplerFields {
+            kind: SamplerKind::PcaGaussian,
+            ..SamplerFields::default()
+        });
+        let density = |f: CohortFields<i64>| CohortFields {
+            sampler: gaussian.clone(),
+            resolution: Some(64),
+            ..f
+        };
+        let r = parse(density(CohortFields {
+            arity: None,
+            ..fields()
+        }))
+        .unwrap();
+        assert_eq!(r.arity, 1);
+        assert!(!r.sampler.is_convex());
+        let r = parse(density(CohortFields {
+            arity: None,
+            anchors: Some(vec![4]),
+            weights: Some(vec![0.7, 0.3]),
+            ..fields()
+        }))
+        .unwrap();
+        assert_eq!((r.arity, r.weights.fixed()), (2, Some(&[0.7, 0.3][..])));
+        for (f, field, rule) in [
+            (
+                CohortFields {
+                    arity: Some(3),
+                    ..fields()
+                },
+                "arity",
+                "range",
+            ),
+            (
+                CohortFields {
+                    arity: None,
+                    selection: Some(Selection::Spread),
+                    ..fields()
+                },
+                "selection",
+                "convex-only",
+            ),
+            (
+                CohortFields {
+                    arity: None,
+                    latent_noise: Some(0.5),
+                    ..fields()
+                },
+                "latent_noise",
+                "convex-only",
+            ),
+            (
+                CohortFields {
+                    arity: None,
+                    weights: Some(vec![0.5, 0.5]),
+                    ..fields()
+                },
+                "weights",
+                "length",
+            ),
+        ] {
+            let err = parse(density(f)).unwrap_err();
+            assert_eq!((err.field.as_str(), err.rule), (field, rule), "{err}");
+        }
+        // The plain fields the command line always sends are accepted.
+        assert!(
+            parse(density(CohortFields {
+                arity: None,
+                selection: Some(Selection::Uniform),
+                latent_noise: Some(0.0),
+                ..fields()
+            }))
+            .is_ok()
+        );
+    }
+
+    #[test]
     fn the_arity_is_checked_against_the_model() {
         let r = parse(CohortFields {
-            arity: 5,
+            arity: Some(5),
             resolution: Some(64),
             ..fields()
         })

@@ -8,7 +8,7 @@ use sqlx::{SqliteConnection, SqlitePool};
 use super::states::JobStatus;
 use crate::cohort::targets::TargetRange;
 use crate::cohort::{
-    CohortFields, CohortRequest, RequestError, RequestLimits, Selection, Weighting,
+    CohortFields, CohortRequest, RequestError, RequestLimits, SamplerFields, Selection, Weighting,
 };
 
 /// A new cohort row: a parsed request and how it arrived.
@@ -81,6 +81,8 @@ pub struct CohortRow {
     pub finished_at: Option<String>,
     /// Anchor ids forced into every shape (from `cohort_anchor`), if any.
     pub anchors: Option<Json<Vec<i64>>>,
+    /// The density sampler, if any (null: convex combinations).
+    pub sampler: Option<Json<SamplerFields>>,
 }
 
 impl CohortRow {
@@ -88,7 +90,7 @@ impl CohortRow {
     pub fn request(&self) -> Result<CohortRequest<i64>, RequestError> {
         let fields = CohortFields {
             count: self.count,
-            arity: self.arity,
+            arity: Some(self.arity),
             weights: self.weights.as_ref().map(|w| w.0.clone()),
             weighting: Some(self.weighting),
             seed: Some(self.seed as u64),
@@ -99,6 +101,7 @@ impl CohortRow {
             targets: self.targets.as_ref().map(|t| t.0.clone()),
             max_candidates: self.max_candidates,
             anchors: self.anchors.as_ref().map(|a| a.0.clone()),
+            sampler: self.sampler.as_ref().map(|s| s.0.clone()),
         };
         CohortRequest::parse(fields, RequestLimits::NONE, || self.seed as u64)
     }
@@ -118,7 +121,8 @@ const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity
         j.error, c.created_at, j.started_at, j.finished_at,
         (select json_group_array(anchor_id) from (select anchor_id from cohort_anchor a
             where a.cohort_id = c.cohort_id order by a.position) having count(*) > 0)
-            as anchors
+            as anchors,
+        c.sampler
     from cohort c join job j on j.job_id = c.job_id";
 
 /// The id the next cohort gets: one above the largest (inside the caller's write
@@ -136,8 +140,8 @@ pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Res
     sqlx::query(
         "insert into cohort (cohort_id, model_id, job_id, count, arity, weighting, weights,
              seed, resolution, latent_noise, selection, min_novelty, idempotency_key,
-             request_hash, targets, max_candidates)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+             request_hash, targets, max_candidates, sampler)
+         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
     )
     .bind(c.cohort_id)
     .bind(c.model_id)
@@ -155,6 +159,7 @@ pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Res
     .bind(c.request_hash)
     .bind(targets)
     .bind(r.targets.as_ref().map(|t| i64::from(t.max_candidates)))
+    .bind(r.sampler.recorded().map(Json))
     .execute(&mut *conn)
     .await?;
     if !r.anchors.is_empty() {

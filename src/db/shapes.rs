@@ -132,6 +132,8 @@ pub struct ShapeRow {
     pub anchor_names: Option<Json<Vec<String>>>,
     /// The owning cohort's seed.
     pub cohort_seed: i64,
+    /// The owning cohort's density sampler, if any (its defaults filled in).
+    pub sampler: Option<Json<crate::cohort::SamplerFields>>,
 }
 
 /// A shape's stored mesh and the transform to mm.
@@ -166,7 +168,7 @@ const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
             join anchor n on n.anchor_id = a.anchor_id
             where a.shape_id = s.shape_id order by a.position) having count(*) > 0)
             as anchor_names,
-        c.seed as cohort_seed
+        c.seed as cohort_seed, c.sampler
     from shape s join cohort c on c.cohort_id = s.cohort_id";
 
 /// Inserts a shape inside the caller's transaction.

@@ -47,12 +47,14 @@ pub struct TrainingShapeInfo {
     pub reconstruction_cd: Option<f64>,
 }
 
-/// What to generate: a convex combination of training latents (and fitted anchors).
+/// What to generate: a convex combination of training latents, or of a latent drawn from a
+/// density sampler, and of fitted anchors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShapeSpec {
-    /// Training shapes mixed (distinct, length = arity).
+    /// Training shapes mixed (distinct; empty when the latent is sampled).
     pub training_indices: Vec<usize>,
-    /// Their weights (non-negative, summing to 1).
+    /// Weights of the training shapes, then of the sampled latent (if any), then of the
+    /// anchors (non-negative, summing to 1).
     pub weights: Vec<f64>,
     /// Seed for any randomness inside generation.
     pub seed: u64,
@@ -62,9 +64,29 @@ pub struct ShapeSpec {
     /// dimension, drawn from `seed` (0 = the plain convex combination).
     #[serde(default)]
     pub latent_noise: f64,
-    /// Fitted latents mixed as well; their weights follow the training shapes' in `weights`.
+    /// Fitted latents mixed as well; their weights come last in `weights`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub anchors: Vec<AnchorLatent>,
+    /// A latent drawn from a density sampler with its transform (instead of training
+    /// shapes); its weight follows the training shapes' in `weights`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampled: Option<SampledLatent>,
+}
+
+/// A latent drawn from a density sampler, with the unit-ball transform drawn with it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SampledLatent {
+    /// The latent code (the model's latent dimension).
+    pub latent: Vec<f32>,
+    /// Unit ball → mm of the drawn shape.
+    pub transform: UnitBallTransform,
+}
+
+impl ShapeSpec {
+    /// Members of the mixture before the anchors: the training shapes, or the sampled latent.
+    pub fn drawn_members(&self) -> usize {
+        self.training_indices.len() + usize::from(self.sampled.is_some())
+    }
 }
 
 impl ShapeSpec {
@@ -77,6 +99,7 @@ impl ShapeSpec {
             resolution,
             latent_noise: 0.0,
             anchors: Vec::new(),
+            sampled: None,
         }
     }
 }
@@ -118,6 +141,9 @@ pub struct TrainingSpec {
     /// Epochs to train (the engine's default when absent).
     #[serde(default)]
     pub epochs: Option<u64>,
+    /// Uploaded shapes to keep out of training, chosen from `seed` (none: train on all).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<usize>,
 }
 
 /// A request to fit a latent to a new mesh for a trained model (network frozen).
@@ -150,6 +176,13 @@ pub trait Engine: Send + Sync + 'static {
 
     /// The model's training latents, in index order (for spread selection).
     fn training_latents(&self, model_dir: &Path) -> anyhow::Result<Vec<Vec<f32>>>;
+
+    /// The training shapes' unit-ball transforms, in index order (density samplers model
+    /// them with the latents).
+    fn training_transforms(&self, model_dir: &Path) -> anyhow::Result<Vec<UnitBallTransform>> {
+        let _ = model_dir;
+        anyhow::bail!("this engine keeps no training transforms")
+    }
 
     /// Generates one shape. Returns early with an error once `cancel` becomes true.
     fn generate_shape(

@@ -19,6 +19,7 @@ use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
 use crate::geometry::sampling::sample_surface;
 use crate::sdf::backend::Backend;
 use crate::sdf::data::DataSource;
+use crate::sdf::data::holdout::HoldoutSpec;
 use crate::sdf::inference::evaluation::EvaluationReport;
 use crate::sdf::inference::mixing::{AnchorPart, Mixture, anchored_latent};
 use crate::sdf::inference::novelty::{NoveltyReference, training_surfaces};
@@ -126,6 +127,17 @@ impl Engine for SdfEngine {
         Ok(cached.latents.clone())
     }
 
+    fn training_transforms(
+        &self,
+        model_dir: &Path,
+    ) -> anyhow::Result<Vec<crate::geometry::normalize::UnitBallTransform>> {
+        let cached = self.model(model_dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        Ok(cached.model.manifest.transforms())
+    }
+
     fn generate_shape(
         &self,
         model_dir: &Path,
@@ -221,6 +233,10 @@ impl Engine for SdfEngine {
             source: DataSource::Directory {
                 path: spec.input_dir.clone(),
             },
+            holdout: spec.holdout.map(|count| HoldoutSpec {
+                count,
+                seed: spec.seed,
+            }),
             setup: setup.clone(),
             backend: self.backend,
             resume,
@@ -296,8 +312,9 @@ impl Engine for SdfEngine {
     }
 }
 
-/// The spec's mixed latent and transform: training latents first, then the anchors (their
-/// weights follow in `spec.weights`); the noise scale comes from the training latents.
+/// The spec's mixed latent and transform: training latents first, then the sampled latent
+/// and the anchors (their weights follow in `spec.weights`); the noise scale comes from the
+/// training latents.
 fn mixed_latent(
     spec: &ShapeSpec,
     latents: &[Vec<f32>],
@@ -305,23 +322,26 @@ fn mixed_latent(
 ) -> anyhow::Result<(crate::geometry::normalize::UnitBallTransform, Vec<f32>)> {
     let k = spec.training_indices.len();
     anyhow::ensure!(
-        spec.weights.len() == k + spec.anchors.len(),
-        "{} weights for {k} training shapes and {} anchors",
+        spec.weights.len() == spec.drawn_members() + spec.anchors.len(),
+        "{} weights for {k} training shapes, {} sampled latents and {} anchors",
         spec.weights.len(),
+        usize::from(spec.sampled.is_some()),
         spec.anchors.len()
     );
     let mixture = Mixture {
         indices: spec.training_indices.clone(),
         weights: spec.weights[..k].to_vec(),
     };
-    let anchors: Vec<AnchorPart<'_>> = spec
-        .anchors
-        .iter()
+    // A sampled latent enters the mixture like an anchor: a latent with its own transform.
+    let sampled = spec.sampled.iter().map(|s| (&s.latent, &s.transform));
+    let anchors = spec.anchors.iter().map(|a| (&a.latent, &a.transform));
+    let anchors: Vec<AnchorPart<'_>> = sampled
+        .chain(anchors)
         .zip(&spec.weights[k..])
-        .map(|(anchor, &weight)| AnchorPart {
+        .map(|((latent, transform), &weight)| AnchorPart {
             weight,
-            latent: &anchor.latent,
-            transform: &anchor.transform,
+            latent,
+            transform,
         })
         .collect();
     Ok(anchored_latent(

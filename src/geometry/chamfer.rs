@@ -91,8 +91,9 @@ pub fn chamfer_between(a: &ChamferIndex, b: &ChamferIndex) -> f64 {
     ab + ba
 }
 
-/// [`chamfer_between`] on the calling thread (bit-identical result).
-fn chamfer_between_serial(a: &ChamferIndex, b: &ChamferIndex) -> f64 {
+/// [`chamfer_between`] on the calling thread (bit-identical result), for callers that
+/// run many pairs in parallel.
+pub fn chamfer_between_serial(a: &ChamferIndex, b: &ChamferIndex) -> f64 {
     if a.is_empty() || b.is_empty() {
         return f64::INFINITY;
     }

@@ -36,6 +36,10 @@ pub struct ModelUpload {
     seed: Option<u64>,
     /// Epochs to train, 1–5000 (default: the CPU preset's 240).
     epochs: Option<u64>,
+    /// Meshes to keep out of training, chosen from the seed (at least two must remain):
+    /// the held-out shapes are fitted with the network frozen after training, and both
+    /// sets become the model's reference populations `training` and `heldout`.
+    holdout: Option<u64>,
     /// Two or more mesh files (STL, OBJ, PLY, GLB, glTF), one part each, named `files`; a
     /// part that is a zip archive counts as the mesh files inside it.
     #[schema(value_type = Vec<String>, format = Binary)]
@@ -80,6 +84,7 @@ pub(super) async fn create_model(
         bytes: state.config.max_archive_bytes,
     };
     let (mut id, mut seed, mut epochs) = (query.id, query.seed.unwrap_or(0), query.epochs);
+    let mut holdout = query.holdout;
     let mut files = Vec::<(String, Vec<u8>)>::new();
     if is_zip_body(request.headers()) {
         let body = Bytes::from_request(request, &state)
@@ -108,6 +113,7 @@ pub(super) async fn create_model(
                 "id" => id = Some(String::from_utf8_lossy(&bytes).trim().to_owned()),
                 "seed" => seed = parse_number("seed", &bytes)?,
                 "epochs" => epochs = Some(parse_number("epochs", &bytes)?),
+                "holdout" => holdout = Some(parse_number("holdout", &bytes)?),
                 "files" | "file" => {
                     let file_name = file_name.unwrap_or_else(|| format!("file-{}", files.len()));
                     if looks_like_zip(Some(&file_name), &bytes) {
@@ -139,6 +145,7 @@ pub(super) async fn create_model(
         let msg = format!("at least 2 mesh files are needed, got {}", files.len());
         return Err(ApiError::invalid("files", "count", msg));
     }
+    let holdout = check_holdout(holdout, files.len())?;
     let checked = files.clone();
     tokio::task::spawn_blocking(move || validate_meshes(&checked))
         .await
@@ -159,6 +166,7 @@ pub(super) async fn create_model(
             model_dir: model_dir.clone(),
             seed,
             epochs,
+            holdout,
         },
     });
     let total_epochs = epochs.unwrap_or_else(|| Preset::Cpu.setup(seed).training.epochs);
@@ -186,6 +194,22 @@ pub(super) async fn create_model(
     ))
 }
 
+/// The held-out count within `1..=files − 2` (two meshes must remain to train on).
+fn check_holdout(holdout: Option<u64>, files: usize) -> Result<Option<usize>> {
+    let Some(k) = holdout else {
+        return Ok(None);
+    };
+    let most = files.saturating_sub(2);
+    if k == 0 || k as usize > most {
+        let msg = format!(
+            "must hold out 1 to {most} of the {files} meshes (at least 2 must remain to \
+             train on), got {k}"
+        );
+        return Err(ApiError::invalid("holdout", "range", msg));
+    }
+    Ok(Some(k as usize))
+}
+
 /// Name of an archive sent as the whole body, in messages.
 const BODY_ARCHIVE: &str = "upload.zip";
 
@@ -199,6 +223,8 @@ pub struct UploadQuery {
     pub seed: Option<u64>,
     /// Epochs to train, 1–5000.
     pub epochs: Option<u64>,
+    /// Meshes to keep out of training (see the form field).
+    pub holdout: Option<u64>,
 }
 
 pub(super) fn is_zip_body(headers: &axum::http::HeaderMap) -> bool {

@@ -109,7 +109,8 @@ const CONVENTIONS: &str = "triangles counter-clockwise seen from outside (outwar
 impl ShapeView {
     fn from_row(s: ShapeRow) -> Self {
         let weights = s.weights.0;
-        let k = s.training_indices.0.len();
+        let sampler = s.sampler.map(|j| j.0);
+        let k = s.training_indices.0.len() + usize::from(sampler.is_some());
         let names = s.anchor_names.map(|n| n.0).unwrap_or_default();
         let anchors = names
             .into_iter()
@@ -136,6 +137,7 @@ impl ShapeView {
                     attempt: s.attempt,
                     candidates: s.candidates,
                     targets_met: s.targets_met,
+                    sampler,
                 },
                 anchor_ids: s.anchor_ids.map(|a| a.0).unwrap_or_default(),
             },

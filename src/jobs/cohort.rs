@@ -15,10 +15,11 @@ use tokio::sync::{mpsc, oneshot};
 use super::priority::spawn_background;
 use super::{JobContext, JobError, join_error, setup, stats};
 use crate::cohort::{
-    CohortError, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape, EngineHandle,
+    CohortError, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape,
+    EngineHandle, ModelLatents,
 };
 use crate::db::{self, cohorts::CohortRow, models::ModelRow};
-use crate::engine::{AnchorLatent, Engine};
+use crate::engine::AnchorLatent;
 use crate::formats::mesh_blob;
 
 /// The payload of a `cohort` job.
@@ -200,11 +201,8 @@ impl Generation<'_> {
             cancel: flag.clone(),
         };
         let built = spawn_background(move || -> Result<CohortGenerator, JobError> {
-            let latents = match request.selection.needs_latents() {
-                false => None,
-                true => Some(Arc::new(training_latents(&*engine, &model_dir, count)?)),
-            };
-            let plan = CohortPlan::new(&request, count, latents, anchors);
+            let latents = ModelLatents::read(&*engine, &model_dir, &request, count)?;
+            let plan = CohortPlan::new(&request, count, latents.as_ref(), anchors)?;
             let reference = engine
                 .novelty_reference(&model_dir, request.resolution, &flag)
                 .map_err(|e| match flag.load(Ordering::SeqCst) {
@@ -272,23 +270,6 @@ impl Generation<'_> {
         tx.commit().await.context("cannot commit shape")?;
         Ok(())
     }
-}
-
-/// The model's training latents, which spread selection picks from.
-fn training_latents(
-    engine: &dyn Engine,
-    model_dir: &std::path::Path,
-    count: usize,
-) -> anyhow::Result<Vec<Vec<f32>>> {
-    let latents = engine
-        .training_latents(model_dir)
-        .context("cannot read the training latents")?;
-    anyhow::ensure!(
-        latents.len() == count,
-        "the engine returned {} latents for {count} training shapes",
-        latents.len()
-    );
-    Ok(latents)
 }
 
 /// The latents of a cohort's anchors, in the listed order; an error names a missing one.

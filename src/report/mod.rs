@@ -2,9 +2,11 @@
 //! self-contained HTML page, for models (reconstruction fidelity) and cohorts (diversity).
 //! Served by the API and written by `aortagen report`.
 
+pub mod figures;
 pub mod html;
 pub mod plot;
 pub mod sections;
+pub mod validation;
 
 pub use html::{Report, Section, render_html};
 pub use plot::{HistogramPlot, Marker, Series, histogram_svg, overlay_svg};

@@ -82,6 +82,15 @@ impl Engine for AnalyticEngine {
         Ok(training_latents())
     }
 
+    fn training_transforms(&self, _: &Path) -> anyhow::Result<Vec<UnitBallTransform>> {
+        Ok((0..TRAINING_SHAPES)
+            .map(|i| UnitBallTransform {
+                centre: CENTRE_MM,
+                radius: training_axes(i).iter().cloned().fold(0.0, f64::max),
+            })
+            .collect())
+    }
+
     fn generate_shape(
         &self,
         _: &Path,
@@ -100,10 +109,13 @@ impl Engine for AnalyticEngine {
         anyhow::ensure!(!cancel.load(Ordering::SeqCst), "generation cancelled");
         let k = spec.training_indices.len();
         let axes = if spec.latent_noise == 0.0 {
-            // Anchors' latents are semi-axes too; their weights follow the training ones.
+            // Anchors' and sampled latents are semi-axes too; their weights follow the
+            // training ones.
             let mut axes = mixed_axes(&spec.training_indices, &spec.weights[..k]);
-            for (anchor, w) in spec.anchors.iter().zip(&spec.weights[k..]) {
-                for (a, &z) in axes.iter_mut().zip(&anchor.latent) {
+            let sampled = spec.sampled.iter().map(|s| &s.latent);
+            let extra = sampled.chain(spec.anchors.iter().map(|a| &a.latent));
+            for (latent, w) in extra.zip(&spec.weights[k..]) {
+                for (a, &z) in axes.iter_mut().zip(latent) {
                     *a += w * f64::from(z);
                 }
             }

@@ -1,13 +1,14 @@
 //! One request, one cohort: `aortagen generate` and `POST /v1/cohorts` on the bundled model
 //! give the same shapes, byte for byte, with the same provenance — plain mixtures, latent
 //! noise with spread selection and anatomical targets, a minimum novelty that forces
-//! redraws, and a fitted anchor.
+//! redraws, a fitted anchor, and the density samplers (a truncated PCA Gaussian with
+//! redraws, a PCA mixture with targets, a sampled latent mixed with an anchor).
 
 use std::path::Path;
 
-use aortagen::cli::generate::{GenerateArgs, Units, run};
+use aortagen::cli::generate::{GenerateArgs, SamplerArgs, Units, run};
 use aortagen::cohort::targets::TargetRange;
-use aortagen::cohort::{Selection, ShapeProvenance, ShapeRecord, Weighting};
+use aortagen::cohort::{SamplerKind, Selection, ShapeProvenance, ShapeRecord, Weighting};
 use aortagen::formats::{MeshFormat, read_mesh_bytes};
 use aortagen::geometry::TriMesh;
 use aortagen::geometry::normalize::UnitBallTransform;
@@ -39,6 +40,8 @@ struct Request {
     max_candidates: u32,
     /// Anchors: (id in the service, name in `anchors.json`).
     anchors: Vec<(i64, String)>,
+    /// A density sampler (none: convex combinations of `arity` training shapes).
+    sampler: Option<SamplerArgs>,
 }
 
 impl Request {
@@ -54,6 +57,7 @@ impl Request {
             targets: Vec::new(),
             max_candidates: 20,
             anchors: Vec::new(),
+            sampler: None,
         }
     }
 
@@ -83,13 +87,18 @@ impl Request {
         if !self.anchors.is_empty() {
             body["anchors"] = json!(self.anchors.iter().map(|a| a.0).collect::<Vec<_>>());
         }
+        if let Some(sampler) = &self.sampler {
+            body["sampler"] = json!(sampler.fields());
+            body.as_object_mut().unwrap().remove("arity");
+        }
         body
     }
 
     fn args(&self, model: &Path, out: &Path) -> GenerateArgs {
         GenerateArgs {
             model: model.to_path_buf(),
-            arity: self.arity,
+            arity: self.sampler.is_none().then_some(self.arity),
+            sampler: self.sampler.clone().unwrap_or_default(),
             weights: None,
             weighting: self.weighting,
             selection: self.selection,
@@ -217,6 +226,51 @@ async fn the_command_line_and_the_service_generate_the_same_cohort() {
     let details = assert_same_cohort(&app, &model, &redrawn).await;
     assert_eq!(details[0]["redraws"], 10);
     assert_eq!(details[0]["novelty_met"], false);
+
+    // A truncated PCA Gaussian, with forced redraws and with targets: every draw is the
+    // sampler's, the provenance names it with its defaults, and both ways agree.
+    let gaussian = SamplerArgs {
+        kind: SamplerKind::PcaGaussian,
+        truncation: Some(2.0),
+        ..SamplerArgs::default()
+    };
+    let sampled = Request {
+        sampler: Some(gaussian.clone()),
+        min_novelty: Some(1.0),
+        ..Request::plain(2, 1, 13)
+    };
+    let details = assert_same_cohort(&app, &model, &sampled).await;
+    for d in &details {
+        let p = &d["provenance"];
+        assert_eq!(p["sampler"]["kind"], "pca_gaussian");
+        assert_eq!(
+            (
+                p["sampler"]["truncation"].as_f64(),
+                p["sampler"]["sigma_scale"].as_f64()
+            ),
+            (Some(2.0), Some(1.0))
+        );
+        assert_eq!(p["training_indices"], json!([]));
+        assert_eq!(p["weights"], json!([1.0]));
+        assert_eq!(d["redraws"], 10);
+    }
+    let mixture = Request {
+        sampler: Some(SamplerArgs {
+            kind: SamplerKind::PcaMixture,
+            components: Some(2),
+            mixture_modes: Some(2),
+            ..SamplerArgs::default()
+        }),
+        targets: vec![("annulus_mm".into(), annulus)],
+        max_candidates: 3,
+        ..Request::plain(2, 1, 17)
+    };
+    let details = assert_same_cohort(&app, &model, &mixture).await;
+    assert!(
+        details
+            .iter()
+            .all(|d| d["provenance"]["candidates"].is_u64())
+    );
 }
 
 #[tokio::test(flavor = "multi_thread")]
@@ -270,6 +324,21 @@ async fn an_anchor_fitted_by_the_service_mixes_in_alike_on_the_command_line() {
     };
     set.add(fitted, manifest.architecture.latent_dim).unwrap();
     set.save(model.path()).unwrap();
+
+    // A sampled latent mixed with the anchor: weights list the sampled latent, then it.
+    let sampled = Request {
+        anchors: vec![(anchor_id, "patient".into())],
+        sampler: Some(SamplerArgs {
+            kind: SamplerKind::PcaGaussian,
+            ..SamplerArgs::default()
+        }),
+        ..Request::plain(2, 2, 23)
+    };
+    for d in assert_same_cohort(&app, model.path(), &sampled).await {
+        assert_eq!(d["provenance"]["anchors"][0]["name"], "patient");
+        assert_eq!(d["provenance"]["weights"].as_array().unwrap().len(), 2);
+        assert_eq!(d["provenance"]["training_indices"], json!([]));
+    }
 
     let request = Request {
         anchors: vec![(anchor_id, "patient".into())],

@@ -73,6 +73,7 @@ fn the_engine_finds_a_training_shape_as_its_own_nearest_neighbour() {
         resolution: 48,
         latent_noise: 0.0,
         anchors: Vec::new(),
+        sampled: None,
     };
     let copy = engine.generate_shape(&dir, &spec, &cancel).unwrap();
     let own = reference.novelty(&copy.mesh_unit, 11).unwrap();

@@ -32,6 +32,7 @@ fn train_tiny(dir: &Path, epochs: u64) -> LoadedModel {
             count: SHAPES,
             seed: 5,
         },
+        holdout: None,
         setup,
         backend: Backend::Flex,
         resume: false,

@@ -19,3 +19,5 @@ mod synth_params;
 mod synth_render;
 mod synth_surface;
 mod training;
+mod validate_cli;
+mod validation;

@@ -207,6 +207,7 @@ proptest! {
             latent_noise: 0.0,
             latents: Some(Arc::new(pseudo_latents(training_shapes, latent_seed))),
             anchors: Vec::new(),
+            sampler: None,
         };
         let spec = plan.shape_spec(index);
         prop_assert_eq!(&spec, &plan.shape_spec(index));

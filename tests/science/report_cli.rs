@@ -100,7 +100,8 @@ fn a_model_without_evaluation_says_how_to_make_one() {
 fn generate(model: &Path, out: &Path, units: Units) {
     aortagen::cli::generate::run(GenerateArgs {
         model: model.to_path_buf(),
-        arity: 2,
+        arity: Some(2),
+        sampler: Default::default(),
         weights: None,
         weighting: Weighting::Dirichlet,
         selection: Selection::Uniform,

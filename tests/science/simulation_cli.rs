@@ -97,7 +97,8 @@ fn an_open_stl_has_one_solid_and_stray_or_bad_flags_are_named() {
 fn generate_args(out: &std::path::Path, simulation: GenerateSimulation) -> GenerateArgs {
     GenerateArgs {
         model: std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/default"),
-        arity: 2,
+        arity: Some(2),
+        sampler: Default::default(),
         weights: None,
         weighting: Weighting::Dirichlet,
         selection: Selection::Uniform,

@@ -41,6 +41,7 @@ fn request<'a>(
             count: SHAPES,
             seed: 5,
         },
+        holdout: None,
         setup: tiny_setup(epochs),
         backend: Backend::Flex,
         resume,
@@ -121,6 +122,72 @@ fn a_tiny_run_trains_saves_loads_and_evaluates() {
 }
 
 #[test]
+fn a_holdout_trains_on_the_rest_resumes_with_the_same_split_and_is_fitted_by_evaluate() {
+    use aortagen::cli::evaluate::{EvaluateArgs, run};
+    use aortagen::sdf::data::holdout::HoldoutSpec;
+    let dir = tempfile::tempdir().unwrap();
+    let source = DataSource::Synth { count: 5, seed: 5 };
+    let with_holdout = |epochs, resume| TrainingRequest {
+        source: source.clone(),
+        holdout: Some(HoldoutSpec { count: 2, seed: 9 }),
+        ..request(dir.path(), epochs, resume, None)
+    };
+    train(&with_holdout(2, false), &mut Silent).unwrap();
+    // Resuming re-applies the recorded split (the spec of the resumed request is ignored).
+    let outcome = train(&with_holdout(3, true), &mut Silent).unwrap();
+    let m = &outcome.manifest;
+    let holdout = m
+        .data
+        .holdout
+        .as_ref()
+        .expect("the manifest records the holdout");
+    assert_eq!((m.shapes.len(), holdout.shapes.len()), (3, 2));
+    let all: Vec<String> = load_source_meshes(&source)
+        .unwrap()
+        .into_iter()
+        .map(|(name, _)| name)
+        .collect();
+    let mut names: Vec<&str> = m.shapes.iter().map(|s| s.name.as_str()).collect();
+    names.extend(holdout.shapes.iter().map(|s| s.name.as_str()));
+    names.sort_unstable();
+    assert_eq!(names, all.iter().map(String::as_str).collect::<Vec<_>>());
+    for h in &holdout.shapes {
+        assert_eq!(all[h.source_index], h.name);
+    }
+
+    let out = tempfile::tempdir().unwrap();
+    let json = out.path().join("evaluation.json");
+    run(EvaluateArgs {
+        model: dir.path().to_path_buf(),
+        data: None,
+        resolution: 20,
+        points: 800,
+        seed: 1,
+        json: Some(json.clone()),
+        worst: None,
+        worst_count: 0,
+        heldout_iterations: 5,
+        backend: Backend::Flex,
+        extraction: ExtractionMethod::Fast,
+    })
+    .unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(report["shapes"].as_array().unwrap().len(), 3);
+    let heldout = &report["heldout"];
+    assert_eq!(heldout["iterations"], 5);
+    let fitted = heldout["shapes"].as_array().unwrap();
+    assert_eq!(fitted.len(), 2);
+    for (shape, h) in fitted.iter().zip(&holdout.shapes) {
+        assert_eq!(shape["name"], h.name.as_str());
+        let cd = shape["chamfer"].as_f64().unwrap();
+        assert!(
+            cd > shape["sampling_floor"].as_f64().unwrap() && cd < 0.5,
+            "{shape}"
+        );
+    }
+}
+
+#[test]
 fn evaluate_writes_the_worst_reconstructions_worst_first_with_a_picture() {
     use aortagen::cli::evaluate::{EvaluateArgs, run};
     let dir = tempfile::tempdir().unwrap();
@@ -137,6 +204,7 @@ fn evaluate_writes_the_worst_reconstructions_worst_first_with_a_picture() {
         json: Some(json.clone()),
         worst: Some(worst.clone()),
         worst_count: 2,
+        heldout_iterations: 0,
         backend: Backend::Flex,
         extraction: ExtractionMethod::Fast,
     })
@@ -430,7 +498,7 @@ mod cohort {
     ) -> Result<CohortRequest<i64>, RequestError> {
         let fields = CohortFields {
             count: 20,
-            arity,
+            arity: Some(arity),
             weights,
             weighting: Some(weighting),
             seed: Some(seed),
@@ -443,7 +511,7 @@ mod cohort {
     }
 
     fn plan(request: &CohortRequest<i64>, training_shapes: usize) -> CohortPlan {
-        CohortPlan::new(request, training_shapes, None, Vec::new())
+        CohortPlan::new(request, training_shapes, None, Vec::new()).unwrap()
     }
 
     #[test]
@@ -599,7 +667,8 @@ mod cohort {
         let out = tempfile::tempdir().unwrap();
         run(GenerateArgs {
             model: model_dir.to_path_buf(),
-            arity: 2,
+            arity: Some(2),
+            sampler: Default::default(),
             weights: Some(weights.into()),
             weighting: Weighting::Dirichlet,
             selection: aortagen::cohort::Selection::Uniform,

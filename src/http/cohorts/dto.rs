@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::cohort::targets::TargetRange;
-use crate::cohort::{CohortFields, Selection, Weighting};
+use crate::cohort::{CohortFields, SamplerFields, Selection, Weighting};
 use crate::db::cohorts::CohortRow;
 use crate::db::shapes::MeasureSummary;
 use crate::db::states::JobStatus;
@@ -20,8 +20,11 @@ pub struct CreateCohort {
     pub model_id: String,
     /// Number of shapes, 1 to the configured maximum.
     pub count: i64,
-    /// Training shapes mixed per generated shape: 2 ≤ arity ≤ training shapes.
-    pub arity: i64,
+    /// Training shapes mixed per generated shape: 2 ≤ arity ≤ training shapes (required
+    /// by the convex sampler). With a density `sampler` each shape mixes its sampled latent
+    /// and the anchors, so arity is 1 + len(anchors) and may be left out.
+    #[serde(default)]
+    pub arity: Option<i64>,
     /// Explicit weights (length = arity, each ≥ 0, summing to 1 within 1e-6), used for every
     /// shape; when absent, `weighting` draws them.
     #[serde(default)]
@@ -70,6 +73,18 @@ pub struct CreateCohort {
     /// order.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub anchors: Option<Vec<i64>>,
+    /// How latents are drawn (default: `{"kind": "convex"}`, combinations of `arity`
+    /// training latents). `pca_gaussian` draws from a Gaussian in the training latents'
+    /// principal components (`truncation` c: each mode within ±c σ; `sigma_scale`;
+    /// `variance_share`), `pca_mixture` from a Gaussian mixture on the leading whitened
+    /// components (`components`, or `max_components` chosen by BIC; `mixture_modes`;
+    /// `variance_share`). Both model the unit-ball transform (size and position in mm)
+    /// jointly with the latent. `selection: spread` and `latent_noise` apply to the convex
+    /// sampler only; `min_novelty` redraws and `targets` candidates are further draws from
+    /// the sampler.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(example = json!({"kind": "pca_gaussian", "truncation": 3.0}))]
+    pub sampler: Option<SamplerFields>,
 }
 
 impl CreateCohort {
@@ -88,6 +103,7 @@ impl CreateCohort {
             targets: self.targets.clone(),
             max_candidates: self.max_candidates,
             anchors: self.anchors.clone(),
+            sampler: self.sampler.clone(),
         }
     }
 
@@ -110,8 +126,12 @@ pub struct CohortView {
     pub progress: Progress,
     /// Number of shapes requested.
     pub count: i64,
-    /// Training shapes mixed per shape.
+    /// Members mixed per shape: training shapes (convex sampler), or the sampled latent
+    /// plus the anchors (density sampler).
     pub arity: i64,
+    /// The density sampler with its defaults filled in (absent: convex combinations).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sampler: Option<SamplerFields>,
     /// Weight strategy used when `weights` is null.
     pub weighting: Weighting,
     /// Explicit weights, if given.
@@ -208,6 +228,7 @@ impl CohortView {
             },
             count: c.count,
             arity: c.arity,
+            sampler: c.sampler.map(|s| s.0),
             weighting: c.weighting,
             weights: c.weights.map(|w| w.0),
             seed: c.seed as u64,

@@ -9,6 +9,7 @@
 
 pub mod batch;
 pub mod cache;
+pub mod holdout;
 
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};

@@ -100,6 +100,48 @@ pub struct EvaluationReport {
     pub sampling_floor_median: f64,
     /// Shapes whose reconstruction failed.
     pub failures: usize,
+    /// The held-out shapes, fitted with the network frozen (models trained with a holdout).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heldout: Option<HeldOutEvaluation>,
+}
+
+/// Reconstruction of the held-out shapes (DeepSDF's test protocol): each fitted with the
+/// network frozen, then meshed and measured exactly as the training shapes are.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutEvaluation {
+    /// Adam steps of each fit.
+    pub iterations: usize,
+    /// Per-shape results in held-out order (`index` is the position among them).
+    pub shapes: Vec<ShapeFidelity>,
+    /// Statistics of the successful Chamfer distances.
+    pub summary: Option<Summary>,
+    /// Median over shapes of the per-shape sampling floor.
+    pub sampling_floor_median: f64,
+    /// Shapes whose fit or reconstruction failed.
+    pub failures: usize,
+}
+
+impl HeldOutEvaluation {
+    /// The summary of `shapes` fitted with `iterations` steps.
+    pub fn new(iterations: usize, shapes: Vec<ShapeFidelity>) -> Self {
+        let (cds, floor) = sorted_figures(&shapes);
+        Self {
+            iterations,
+            failures: shapes.len() - cds.len(),
+            summary: summarize(&cds),
+            sampling_floor_median: quantile(&floor, 0.5),
+            shapes,
+        }
+    }
+}
+
+/// The successful Chamfer distances and the sampling floors of `shapes`, each sorted.
+fn sorted_figures(shapes: &[ShapeFidelity]) -> (Vec<f64>, Vec<f64>) {
+    let mut cds: Vec<f64> = shapes.iter().filter_map(|s| s.chamfer).collect();
+    cds.sort_by(f64::total_cmp);
+    let mut floors: Vec<f64> = shapes.iter().map(|s| s.sampling_floor).collect();
+    floors.sort_by(f64::total_cmp);
+    (cds, floors)
 }
 
 /// Evaluates every training shape of `model` against `originals` (in the shapes' own units,
@@ -176,10 +218,7 @@ fn report(
     settings: EvaluationSettings,
     shapes: Vec<ShapeFidelity>,
 ) -> EvaluationReport {
-    let mut cds: Vec<f64> = shapes.iter().filter_map(|s| s.chamfer).collect();
-    cds.sort_by(f64::total_cmp);
-    let mut floors: Vec<f64> = shapes.iter().map(|s| s.sampling_floor).collect();
-    floors.sort_by(f64::total_cmp);
+    let (cds, floors) = sorted_figures(&shapes);
     EvaluationReport {
         model_id,
         units: CHAMFER_UNITS.into(),
@@ -189,6 +228,7 @@ fn report(
         histogram: histogram(&cds, 10),
         sampling_floor_median: quantile(&floors, 0.5),
         shapes,
+        heldout: None,
     }
 }
 

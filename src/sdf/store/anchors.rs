@@ -261,6 +261,7 @@ mod tests {
                 source: crate::sdf::data::DataSource::Synth { count: 1, seed: 0 },
                 sampling: setup.sampling,
                 dataset_key: String::new(),
+                holdout: None,
             },
             shapes: Vec::new(),
             progress: Default::default(),

@@ -9,6 +9,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::normalize::UnitBallTransform;
+use crate::sdf::data::holdout::Holdout;
 use crate::sdf::data::{DataSource, SamplingSettings};
 use crate::sdf::model::network::SdfNetworkConfig;
 use crate::sdf::training::config::TrainingConfig;
@@ -85,6 +86,9 @@ pub struct DataRecord {
     pub sampling: SamplingSettings,
     /// Hash of the inputs and settings (names the sample cache).
     pub dataset_key: String,
+    /// Source shapes kept out of training (none: every source shape trained).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub holdout: Option<Holdout>,
 }
 
 /// The whole manifest.

@@ -9,6 +9,7 @@
 
 pub mod config;
 pub mod fit;
+pub mod heldout;
 pub mod loss;
 pub mod step;
 
@@ -21,6 +22,7 @@ use anyhow::{Context, bail, ensure};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::batch::{draw_batch, epoch_batches};
 use crate::sdf::data::cache::prepare_cached;
+use crate::sdf::data::holdout::{HoldoutSpec, load_split, split};
 use crate::sdf::data::{DataSource, PreparedDataset, load_source_meshes};
 use crate::sdf::model::decoder::SdfAutoDecoder;
 use crate::sdf::store::manifest::{
@@ -72,6 +74,9 @@ pub struct TrainingRequest<'a> {
     pub out_dir: PathBuf,
     /// The shapes.
     pub source: DataSource,
+    /// Source shapes to keep out of training (a fresh run only: a resumed run keeps the
+    /// split its manifest records).
+    pub holdout: Option<HoldoutSpec>,
     /// Hyper-parameters (ignored except `epochs` when resuming: the saved ones rule).
     pub setup: TrainingSetup,
     /// Compute backend.
@@ -129,7 +134,11 @@ fn fresh_state(
     let setup = &request.setup;
     setup.training.validate()?;
     setup.network.validate()?;
-    let meshes = load_source_meshes(&request.source)?;
+    let shapes = split(
+        load_source_meshes(&request.source)?,
+        request.holdout.as_ref(),
+    )?;
+    let meshes = shapes.training;
     std::fs::create_dir_all(&request.out_dir)
         .with_context(|| format!("cannot create {}", request.out_dir.display()))?;
     let (data, key) = prepare_cached(&meshes, &setup.sampling, Some(&request.out_dir))?;
@@ -153,6 +162,7 @@ fn fresh_state(
             source: request.source.clone(),
             sampling: setup.sampling,
             dataset_key: key,
+            holdout: shapes.holdout,
         },
         shapes: data
             .shapes
@@ -201,7 +211,7 @@ fn resume_state(
     let mut manifest = read_manifest(dir).context("cannot resume")?;
     manifest.training.epochs = request.setup.training.epochs;
     manifest.backend = request.backend.name().into();
-    let meshes = load_source_meshes(&manifest.data.source)?;
+    let meshes = load_split(&manifest.data.source, manifest.data.holdout.as_ref())?.training;
     let (data, key) = prepare_cached(&meshes, &manifest.data.sampling, Some(dir))?;
     ensure!(
         key == manifest.data.dataset_key,
