@@ -75,6 +75,24 @@ async function shapePixels(page) {
   });
 }
 
+/** Pixels of the whole viewer canvas in the opening markers' colour (#1f7a4a). */
+async function markerPixels(page) {
+  return page.evaluate(() => {
+    const canvas = document.querySelector("#viewer-stage canvas");
+    const copy = document.createElement("canvas");
+    copy.width = canvas.width;
+    copy.height = canvas.height;
+    const ctx = copy.getContext("2d");
+    ctx.drawImage(canvas, 0, 0);
+    const data = ctx.getImageData(0, 0, copy.width, copy.height).data;
+    let marker = 0;
+    for (let i = 0; i < data.length; i += 4) {
+      if (Math.abs(data[i] - 0x1f) + Math.abs(data[i + 1] - 0x7a) + Math.abs(data[i + 2] - 0x4a) < 24) marker++;
+    }
+    return marker;
+  });
+}
+
 const context = await chromium.launchPersistentContext(userDataDir, {
   executablePath: process.env.CHROMIUM ?? "/usr/bin/chromium",
   headless: true,
@@ -200,6 +218,21 @@ await step("a second shape overlays the first with a distance colour map", async
   assert.ok(pixels.colours > 8, `a colour map shows several colours, got ${pixels.colours}`);
   assert.match(page.url(), new RegExp(`overlay=${shapeIds[1]}`));
   await screenshot(page, "overlay");
+});
+
+await step("the viewer finds a shape's openings and labels them", async () => {
+  await page.click("#find-openings");
+  await page.locator("#openings li, #openings-error").first().waitFor({ timeout: 120000 });
+  const error = await page.locator("#openings-error").count();
+  assert.equal(error, 0, error ? await page.locator("#openings-error").textContent() : "");
+  const names = await page.$$eval("#openings li", (items) => items.map((li) => li.textContent));
+  assert.ok(names.some((n) => n.startsWith("inlet:")), `no inlet among ${names}`);
+  assert.ok(names.some((n) => n.startsWith("outlet")), `no outlet among ${names}`);
+  assert.ok(names.every((n) => /⌀ \d/.test(n)), `every opening shows its diameter: ${names}`);
+  assert.equal(await page.getAttribute("#viewer-stage", "data-markers"), String(names.length));
+  const marked = await markerPixels(page);
+  assert.ok(marked > 20, `the openings' markers show in the scene (${marked} pixels of their colour)`);
+  await screenshot(page, "viewer-openings");
 });
 
 await step("the cohorts list shows the cohort as succeeded", async () => {

@@ -32,9 +32,20 @@ function measurementFacts(s) {
   ]);
 }
 
-/** Labelled openings when the shape lists them ({name, centre: [x, y, z]} in mm). */
-function openingsOf(shape) {
-  return Array.isArray(shape.openings) ? shape.openings.filter((o) => Array.isArray(o.centre)) : [];
+/** Face ids of caps lie between the wall (0) and the flow-extension walls (100 and up). */
+const EXTENSION_BASE = 100;
+
+/**
+ * The labelled openings of a shape's simulation mesh ({name, centroid_mm, equivalent_diameter_mm}),
+ * from the shape's face table once the service has made it, else null.
+ */
+function openingsOf(faces) {
+  return Array.isArray(faces) ? faces.filter((f) => f.id > 0 && f.id < EXTENSION_BASE && Array.isArray(f.centroid_mm)) : null;
+}
+
+function openingList(openings) {
+  return h("ul", { id: "openings" }, openings.map((o) =>
+    h("li", { dataset: { face: o.id } }, `${o.name}: ⌀ ${num(o.equivalent_diameter_mm, 3)} mm`)));
 }
 
 export async function viewerPage(main, params) {
@@ -108,15 +119,45 @@ export async function viewerPage(main, params) {
     stage.dataset.overlay = overlayId ? "ready" : "none";
   }
 
+  /** Markers and a list for known openings, else a button that asks the service for them. */
+  function showOpenings(panel, openings) {
+    if (openings) {
+      scene.setMarkers(openings.map((o) => o.centroid_mm));
+      stage.dataset.markers = String(openings.length);
+      replace(panel, openings.length ? openingList(openings) : h("p", { class: "muted" }, "No openings found."));
+      return;
+    }
+    scene.setMarkers([]);
+    stage.dataset.markers = "0";
+    if (shape.faces_error) {
+      replace(panel, h("p", { class: "muted", id: "openings-error" }, shape.faces_error));
+      return;
+    }
+    const find = h("button", { type: "button", class: "small", id: "find-openings" }, "Find openings");
+    const note = h("p", { class: "muted" }, "Cuts the inlet and outlets and labels them (a few seconds).");
+    find.addEventListener("click", async () => {
+      const forShape = shapeId;
+      find.disabled = true;
+      find.textContent = "Finding openings…";
+      try {
+        const table = (await api(`/v1/shapes/${forShape}/faces`)).data;
+        if (forShape === shapeId) showOpenings(panel, openingsOf(table.openings));
+      } catch (error) {
+        if (forShape !== shapeId) return;
+        replace(panel, h("p", { class: "muted", id: "openings-error" }, error.message));
+      }
+    });
+    replace(panel, find, note);
+  }
+
   async function showShape() {
     stage.dataset.state = "loading";
     status.textContent = `Loading shape ${shapeId}…`;
     shape = shapes.find((s) => s.id === shapeId) ?? (await api(`/v1/shapes/${shapeId}`)).data;
     await scene.setShape(await fetchBytes(`/v1/shapes/${shapeId}/mesh`));
-    const openings = openingsOf(shape);
-    scene.setMarkers(openings.map((o) => o.centre));
-    replace(info, h("h2", {}, "Measurements"), measurementFacts(shape),
-      openings.length > 0 && [h("h3", {}, "Openings"), h("ul", {}, openings.map((o) => h("li", {}, o.name)))]);
+    const openingsPanel = h("div", { class: "openings" });
+    replace(info, h("h2", {}, "Measurements"), measurementFacts(shape), h("h3", {}, "Openings"), openingsPanel);
+    showOpenings(openingsPanel, openingsOf(shape.faces));
     status.textContent = "Drag to orbit, wheel to zoom, right-drag or arrow keys (canvas focused) to pan.";
     stage.dataset.state = "ready";
     await showOverlay();

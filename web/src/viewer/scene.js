@@ -7,6 +7,7 @@ import {
   DirectionalLight,
   HemisphereLight,
   Mesh,
+  MeshBasicMaterial,
   MeshStandardMaterial,
   PerspectiveCamera,
   Scene,
@@ -104,12 +105,20 @@ export class ShapeScene {
     return { max, mean };
   }
 
-  /** Small spheres at labelled points (e.g. openings), in mm. */
+  /**
+   * Small spheres at labelled points (e.g. openings), in mm. They are drawn over the surface:
+   * an opening's cap lies where the simulation mesh trims the vessel, inside the closed shape.
+   */
   setMarkers(points) {
-    for (const m of this.markers) this.scene.remove(m);
-    const radius = this.radius() * 0.03;
+    for (const m of this.markers) {
+      this.scene.remove(m);
+      m.geometry.dispose();
+      m.material.dispose();
+    }
+    const radius = this.radius() * 0.04;
     this.markers = points.map(([x, y, z]) => {
-      const m = new Mesh(new SphereGeometry(radius, 16, 12), new MeshStandardMaterial({ color: 0x1f7a4a }));
+      const m = new Mesh(new SphereGeometry(radius, 16, 12), new MeshBasicMaterial({ color: 0x1f7a4a, depthTest: false }));
+      m.renderOrder = 10;
       m.position.set(x, y, z);
       this.scene.add(m);
       return m;
