@@ -404,6 +404,24 @@ async fn an_anchor_is_deleted_unless_it_is_fitting_or_used_by_a_cohort() {
     );
 }
 
+#[tokio::test]
+async fn a_deleted_anchors_id_is_not_given_again() {
+    let app = spawn_app().await;
+    let r = fit(&app, MODEL, &[("file", Some("p.stl"), ellipsoid_stl(AXES))]).await;
+    let anchor = r.json()["anchor_id"].as_i64().unwrap();
+    app.run_pending_jobs().await;
+    let path = format!("/v1/anchors/{anchor}");
+    assert_eq!(
+        app.request(Method::DELETE, &path, &[], "").await.status,
+        StatusCode::NO_CONTENT
+    );
+    let again = fit(&app, MODEL, &[("file", Some("p.stl"), ellipsoid_stl(AXES))]).await;
+    assert_eq!(again.status, StatusCode::ACCEPTED);
+    let next = again.json()["anchor_id"].as_i64().unwrap();
+    assert!(next > anchor, "anchor {next} after {anchor}");
+    assert_eq!(app.get(&path).await.status, StatusCode::NOT_FOUND);
+}
+
 fn cohort_with_anchors(anchors: &[i64]) -> Value {
     json!({
         "model_id": MODEL, "count": 3, "arity": 2, "seed": 7, "resolution": 64,
