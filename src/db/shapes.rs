@@ -274,6 +274,15 @@ pub async fn cohort_meshes(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Ve
     .await
 }
 
+/// A cohort's shape ids in index order (the rows of its pairwise matrix), without
+/// reading their meshes.
+pub async fn cohort_shape_ids(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar("select shape_id from shape where cohort_id = ? order by shape_index")
+        .bind(cohort_id)
+        .fetch_all(pool)
+        .await
+}
+
 /// Mean, min and max of area and volume over a cohort's shapes.
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct MeasureSummary {

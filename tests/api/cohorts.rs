@@ -210,6 +210,36 @@ async fn deleting_a_cohort_removes_its_shapes_metrics_and_job() {
     }
 }
 
+#[tokio::test]
+async fn metrics_list_the_shape_ids_without_reading_any_mesh() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(3, 2)).await;
+    app.run_pending_jobs().await;
+    let path = format!("/v1/cohorts/{id}/metrics?matrix=true");
+    let before = app.get(&path).await.json();
+    let ids: Vec<i64> =
+        sqlx::query_scalar("select shape_id from shape where cohort_id = ? order by shape_index")
+            .bind(id)
+            .fetch_all(&app.state.pool)
+            .await
+            .unwrap();
+    assert_eq!(before["shape_ids"], json!(ids));
+
+    // Without the mesh column a query that reads it fails: the endpoint must not need it.
+    sqlx::query("alter table shape drop column mesh")
+        .execute(&app.state.pool)
+        .await
+        .unwrap();
+    let after = app.get(&path).await;
+    assert_eq!(
+        after.status,
+        StatusCode::OK,
+        "{}",
+        String::from_utf8_lossy(&after.body)
+    );
+    assert_eq!(after.json(), before);
+}
+
 /// A cohort's job, cohort and shape ids, read back from the service.
 async fn cohort_ids(app: &crate::helpers::TestApp, cohort: i64) -> (i64, i64, Vec<i64>) {
     let view = app.get(&format!("/v1/cohorts/{cohort}")).await.json();
