@@ -99,7 +99,8 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_MAX_ARCHIVE_ENTRIES", default_value_t = 1000)]
     pub max_archive_entries: usize,
 
-    /// Most bytes an uploaded zip archive may expand to (guards against zip bombs).
+    /// Most bytes the zip archives of one upload may expand to together (guards against zip
+    /// bombs).
     #[arg(long, env = "AORTAGEN_MAX_ARCHIVE_BYTES", default_value_t = 1024 * 1024 * 1024)]
     pub max_archive_bytes: usize,
 

@@ -120,12 +120,10 @@ pub async fn insert(conn: &mut SqliteConnection, a: &NewAnchor<'_>) -> sqlx::Res
     Ok(())
 }
 
-/// The id the next anchor gets: one above the largest (inside the caller's write
-/// transaction, so no other writer takes it), known before the fit job that refers to it.
+/// Allocates the next anchor's id (never one a deleted anchor had, see [`super::ids`])
+/// inside the caller's write transaction, known before the fit job that refers to it.
 pub async fn next_id(conn: &mut SqliteConnection) -> sqlx::Result<i64> {
-    sqlx::query_scalar("select coalesce(max(anchor_id), 0) + 1 from anchor")
-        .fetch_one(conn)
-        .await
+    super::ids::allocate(conn, super::ids::IdKind::Anchor).await
 }
 
 /// Records a successful fit.

@@ -125,12 +125,10 @@ const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity
         c.sampler
     from cohort c join job j on j.job_id = c.job_id";
 
-/// The id the next cohort gets: one above the largest (inside the caller's write
-/// transaction, so no other writer takes it), known before the job that refers to it.
+/// Allocates the next cohort's id (never one a deleted cohort had, see [`super::ids`])
+/// inside the caller's write transaction, known before the job that refers to it.
 pub async fn next_id(conn: &mut SqliteConnection) -> sqlx::Result<i64> {
-    sqlx::query_scalar("select coalesce(max(cohort_id), 0) + 1 from cohort")
-        .fetch_one(conn)
-        .await
+    super::ids::allocate(conn, super::ids::IdKind::Cohort).await
 }
 
 /// Inserts a cohort inside the caller's transaction.

@@ -78,9 +78,12 @@ pub async fn enqueue(
     payload: &str,
     progress_total: i64,
 ) -> sqlx::Result<i64> {
+    let job_id = super::ids::allocate(&mut *conn, super::ids::IdKind::Job).await?;
     sqlx::query_scalar(
-        "insert into job (kind, payload, progress_total) values (?, ?, ?) returning job_id",
+        "insert into job (job_id, kind, payload, progress_total) values (?, ?, ?, ?)
+         returning job_id",
     )
+    .bind(job_id)
     .bind(kind)
     .bind(payload)
     .bind(progress_total)

@@ -5,6 +5,7 @@
 pub mod anchors;
 pub mod cohort_metrics;
 pub mod cohorts;
+pub mod ids;
 pub mod job_changes;
 pub mod jobs;
 pub mod models;

@@ -173,16 +173,18 @@ const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
 
 /// Inserts a shape inside the caller's transaction.
 pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Result<i64> {
+    let shape_id = super::ids::allocate(&mut *conn, super::ids::IdKind::Shape).await?;
     sqlx::query_scalar(
-        "insert into shape (cohort_id, shape_index, training_indices, weights, seed, resolution,
+        "insert into shape (shape_id, cohort_id, shape_index, training_indices, weights, seed, resolution,
              software_version, vertex_count, triangle_count, area_mm2, volume_mm3,
              centre_x, centre_y, centre_z, radius, mesh, mesh_sha256, latent_noise, selection,
              attempt, redraws, novelty_cd, nearest_training_index, novelty_met, anatomy,
              anatomy_error, candidates, targets_met)
          values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,
-             ?, ?)
+             ?, ?, ?)
          returning shape_id",
     )
+    .bind(shape_id)
     .bind(s.cohort_id)
     .bind(s.shape_index)
     .bind(Json(s.training_indices))
@@ -270,6 +272,15 @@ pub async fn cohort_meshes(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Ve
     .bind(cohort_id)
     .fetch_all(pool)
     .await
+}
+
+/// A cohort's shape ids in index order (the rows of its pairwise matrix), without
+/// reading their meshes.
+pub async fn cohort_shape_ids(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar("select shape_id from shape where cohort_id = ? order by shape_index")
+        .bind(cohort_id)
+        .fetch_all(pool)
+        .await
 }
 
 /// Mean, min and max of area and volume over a cohort's shapes.

@@ -20,6 +20,9 @@ use subtle::{Choice, ConstantTimeEq};
 use super::error::ApiError;
 use crate::config::Config;
 
+/// The environment variable of the key list, named in errors.
+pub const KEYS_VARIABLE: &str = "AORTAGEN_API_KEYS";
+
 /// Paths answered without a key whatever the configuration (orchestrators and scrapers).
 pub const PUBLIC_PATHS: [&str; 3] = ["/healthz", "/readyz", "/metrics"];
 
@@ -51,9 +54,10 @@ pub enum Decision {
 }
 
 impl AccessPolicy {
-    /// Keys from the flag/environment list and the keys file. A keys file that is
-    /// configured but unreadable or empty is an error: the service must not start open
-    /// when its operator meant it to be closed.
+    /// Keys from the flag/environment list and the keys file. A key list that is given but
+    /// holds only blanks or commas (`AORTAGEN_API_KEYS=""`, a template left unfilled), or a
+    /// keys file that is configured but unreadable or empty, is an error: the service must
+    /// not start open when its operator meant it to be closed.
     pub fn from_config(config: &Config) -> anyhow::Result<Self> {
         let mut keys: Vec<String> = config
             .api_keys
@@ -61,6 +65,12 @@ impl AccessPolicy {
             .map(|k| k.expose().trim().to_owned())
             .filter(|k| !k.is_empty())
             .collect();
+        anyhow::ensure!(
+            config.api_keys.is_empty() || !keys.is_empty(),
+            "{KEYS_VARIABLE} (--api-keys) is set but holds no key, only blanks or commas; \
+             the service would run without access control. Give at least one key, or unset \
+             {KEYS_VARIABLE} to run open on purpose"
+        );
         if let Some(path) = &config.api_keys_file {
             let from_file = read_keys_file(path)?;
             anyhow::ensure!(
@@ -213,6 +223,25 @@ mod tests {
                 Decision::Allow
             );
         }
+    }
+
+    #[test]
+    fn a_key_list_of_only_blanks_refuses_to_start_and_names_the_variable() {
+        let config = |keys: &[&str]| {
+            let mut c = Config::with_database("sqlite::memory:", "127.0.0.1:0");
+            c.api_keys = keys.iter().map(|k| k.parse().unwrap()).collect();
+            c
+        };
+        for blanks in [&[""][..], &[" "], &["", " ", ""]] {
+            let err = AccessPolicy::from_config(&config(blanks)).unwrap_err();
+            let message = err.to_string();
+            assert!(message.contains(KEYS_VARIABLE), "{message}");
+            assert!(message.contains("holds no key"), "{message}");
+        }
+        let unset = AccessPolicy::from_config(&config(&[])).unwrap();
+        assert!(!unset.is_enabled(), "no list at all runs open on purpose");
+        let one = AccessPolicy::from_config(&config(&["", " k-1 "])).unwrap();
+        assert_eq!(one.digests.len(), 1);
     }
 
     #[test]

@@ -13,10 +13,8 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extractors::{ApiQuery, parse_id};
-use super::model_upload::{
-    body_error, is_zip_body, mesh_format, parse_number, unpack_blocking, validate_mesh,
-};
-use super::upload_archive::{ArchiveLimits, looks_like_zip};
+use super::model_upload::{body_error, is_zip_body, parse_number, unpack_blocking, validate_mesh};
+use super::upload_archive::{ArchiveLimits, Unpacked, count_files, looks_like_zip};
 use crate::db::states::{AnchorStatus, JobStatus, ModelStatus};
 use crate::db::{self, anchors::AnchorRow};
 use crate::engine::FitSpec;
@@ -212,12 +210,15 @@ async fn fit_model(
     if let Some(name) = &upload.name {
         check_name(name)?;
     }
-    let (file_name, bytes) = one_file(upload.files)?;
-    let checked = (file_name.clone(), bytes.clone());
-    tokio::task::spawn_blocking(move || validate_mesh("file", &checked.0, &checked.1))
-        .await
-        .map_err(anyhow::Error::from)??;
-    let ext = mesh_format(&file_name, &bytes).map_or("mesh", |f| f.extension());
+    // Moved to the validating thread and back: the file is held once, not copied.
+    let (file_name, bytes, format) = tokio::task::spawn_blocking(move || {
+        let (file_name, bytes) = upload.file;
+        let format = validate_mesh("file", &file_name, &bytes)?;
+        Ok::<_, ApiError>((file_name, bytes, format))
+    })
+    .await
+    .map_err(anyhow::Error::from)??;
+    let ext = format.extension();
 
     let mut submission = state.queue.begin().await?;
     let name = match &upload.name {
@@ -235,7 +236,7 @@ async fn fit_model(
         None => free_name(submission.conn(), &model_id, &file_name).await?,
     };
     let anchor_id = db::anchors::next_id(submission.conn()).await?;
-    // Only the format of the client's name is kept: no path from the client reaches the disk.
+    // Stored under the format validation read it as: no path from the client reaches the disk.
     let path = state
         .config
         .models_dir
@@ -388,26 +389,25 @@ async fn load(state: &AppState, id: &str) -> Result<AnchorRow> {
         .ok_or_else(|| ApiError::not_found("anchor", id))
 }
 
-/// The fields and files of a fit request, from either body form.
+/// The fields and the one file of a fit request, from either body form.
 struct Upload {
     name: Option<String>,
     iterations: Option<u64>,
     seed: u64,
-    files: Vec<(String, Vec<u8>)>,
+    file: (String, Vec<u8>),
 }
 
+/// Reads a fit request. The one-file rule is checked on the parts and on an archive's
+/// directory before anything is decompressed.
 async fn read_upload(state: &AppState, query: FitQuery, request: Request) -> Result<Upload> {
     let limit = state.config.max_upload_bytes;
     let archive_limits = ArchiveLimits {
         entries: state.config.max_archive_entries,
         bytes: state.config.max_archive_bytes,
     };
-    let mut upload = Upload {
-        name: query.name,
-        iterations: query.iterations,
-        seed: query.seed.unwrap_or(0),
-        files: Vec::new(),
-    };
+    let (mut name, mut iterations, mut seed) =
+        (query.name, query.iterations, query.seed.unwrap_or(0));
+    let mut file: Option<(String, Bytes)> = None;
     let multipart = request
         .headers()
         .get(header::CONTENT_TYPE)
@@ -422,13 +422,14 @@ async fn read_upload(state: &AppState, query: FitQuery, request: Request) -> Res
         let body = Bytes::from_request(request, state)
             .await
             .map_err(|e| body_error(e.status(), e.body_text(), limit))?;
-        let name = query.file_name.unwrap_or_else(|| "upload".into());
-        if zip || looks_like_zip(Some(&name), &body) {
-            upload.files = unpack_blocking(name, body, archive_limits).await?;
-        } else {
-            upload.files.push((name, body.to_vec()));
-        }
-        return Ok(upload);
+        let file_name = query.file_name.unwrap_or_else(|| "upload".into());
+        let file = one_file(zip, file_name, body, archive_limits).await?;
+        return Ok(Upload {
+            name,
+            iterations,
+            seed,
+            file,
+        });
     }
     let mut form = Multipart::from_request(request, state).await.map_err(|e| {
         ApiError::UnsupportedMediaType {
@@ -448,17 +449,14 @@ async fn read_upload(state: &AppState, query: FitQuery, request: Request) -> Res
             .await
             .map_err(|e| body_error(e.status(), e.body_text(), limit))?;
         match field_name.as_str() {
-            "name" => upload.name = Some(String::from_utf8_lossy(&bytes).trim().to_owned()),
-            "iterations" => upload.iterations = Some(parse_number("iterations", &bytes)?),
-            "seed" => upload.seed = parse_number("seed", &bytes)?,
+            "name" => name = Some(String::from_utf8_lossy(&bytes).trim().to_owned()),
+            "iterations" => iterations = Some(parse_number("iterations", &bytes)?),
+            "seed" => seed = parse_number("seed", &bytes)?,
             "file" | "files" => {
-                let file_name = file_name.unwrap_or_else(|| "upload".into());
-                if looks_like_zip(Some(&file_name), &bytes) {
-                    let members = unpack_blocking(file_name, bytes, archive_limits).await?;
-                    upload.files.extend(members);
-                } else {
-                    upload.files.push((file_name, bytes.to_vec()));
+                if file.is_some() {
+                    return Err(file_count_error("more than one"));
                 }
+                file = Some((file_name.unwrap_or_else(|| "upload".into()), bytes));
             }
             other => {
                 return Err(ApiError::invalid(
@@ -469,15 +467,40 @@ async fn read_upload(state: &AppState, query: FitQuery, request: Request) -> Res
             }
         }
     }
-    Ok(upload)
+    let Some((file_name, bytes)) = file else {
+        return Err(file_count_error("0"));
+    };
+    let file = one_file(false, file_name, bytes, archive_limits).await?;
+    Ok(Upload {
+        name,
+        iterations,
+        seed,
+        file,
+    })
 }
 
-fn one_file(mut files: Vec<(String, Vec<u8>)>) -> Result<(String, Vec<u8>)> {
-    if files.len() != 1 {
-        let msg = format!("exactly one mesh file is needed, got {}", files.len());
-        return Err(ApiError::invalid("file", "count", msg));
+fn file_count_error(got: &str) -> ApiError {
+    let msg = format!("exactly one mesh file is needed, got {got}");
+    ApiError::invalid("file", "count", msg)
+}
+
+/// The uploaded file, or the one mesh file of an uploaded archive (`zip`: the body said it
+/// is one), whose directory is counted before its member is decompressed.
+async fn one_file(
+    zip: bool,
+    name: String,
+    bytes: Bytes,
+    limits: ArchiveLimits,
+) -> Result<(String, Vec<u8>)> {
+    if !(zip || looks_like_zip(Some(&name), &bytes)) {
+        return Ok((name, Vec::from(bytes)));
     }
-    Ok(files.remove(0))
+    let files = count_files(&name, &bytes, limits)?;
+    if files != 1 {
+        return Err(file_count_error(&format!("{files} in {name}")));
+    }
+    let mut unpacked = unpack_blocking(name, bytes, limits, Unpacked::default()).await?;
+    unpacked.files.pop().ok_or_else(|| file_count_error("0"))
 }
 
 fn check_name(name: &str) -> Result<()> {

@@ -18,6 +18,7 @@ pub mod metrics;
 pub mod model_upload;
 pub mod models;
 pub mod openapi;
+pub mod rendering;
 pub mod reports;
 pub mod server;
 pub mod shapes;

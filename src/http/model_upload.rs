@@ -13,7 +13,7 @@ use serde::Serialize;
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extractors::ApiQuery;
-use super::upload_archive::{ArchiveLimits, looks_like_zip, unpack};
+use super::upload_archive::{ArchiveLimits, Unpacked, looks_like_zip, unpack};
 use crate::db;
 use crate::db::states::ModelStatus;
 use crate::engine::TrainingSpec;
@@ -85,12 +85,13 @@ pub(super) async fn create_model(
     };
     let (mut id, mut seed, mut epochs) = (query.id, query.seed.unwrap_or(0), query.epochs);
     let mut holdout = query.holdout;
-    let mut files = Vec::<(String, Vec<u8>)>::new();
+    // Plain files and archive members in upload order, with what the archives expanded to.
+    let mut upload = Unpacked::default();
     if is_zip_body(request.headers()) {
         let body = Bytes::from_request(request, &state)
             .await
             .map_err(|e| body_error(e.status(), e.body_text(), limit))?;
-        files = unpack_blocking(BODY_ARCHIVE.into(), body, archive_limits).await?;
+        upload = unpack_blocking(BODY_ARCHIVE.into(), body, archive_limits, upload).await?;
     } else {
         let mut multipart = Multipart::from_request(request, &state)
             .await
@@ -115,11 +116,12 @@ pub(super) async fn create_model(
                 "epochs" => epochs = Some(parse_number("epochs", &bytes)?),
                 "holdout" => holdout = Some(parse_number("holdout", &bytes)?),
                 "files" | "file" => {
-                    let file_name = file_name.unwrap_or_else(|| format!("file-{}", files.len()));
+                    let file_name =
+                        file_name.unwrap_or_else(|| format!("file-{}", upload.files.len()));
                     if looks_like_zip(Some(&file_name), &bytes) {
-                        files.extend(unpack_blocking(file_name, bytes, archive_limits).await?);
+                        upload = unpack_blocking(file_name, bytes, archive_limits, upload).await?;
                     } else {
-                        files.push((file_name, bytes.to_vec()));
+                        upload.files.push((file_name, Vec::from(bytes)));
                     }
                 }
                 other => {
@@ -141,15 +143,19 @@ pub(super) async fn create_model(
     let model_id =
         id.unwrap_or_else(|| format!("model-{}", std::process::id() ^ rand::random::<u32>()));
     check_model_id(&model_id)?;
+    let files = upload.files;
     if files.len() < 2 {
         let msg = format!("at least 2 mesh files are needed, got {}", files.len());
         return Err(ApiError::invalid("files", "count", msg));
     }
     let holdout = check_holdout(holdout, files.len())?;
-    let checked = files.clone();
-    tokio::task::spawn_blocking(move || validate_meshes(&checked))
-        .await
-        .map_err(anyhow::Error::from)??;
+    // Moved to the validating thread and back: the files are held once, not copied.
+    let (files, formats) = tokio::task::spawn_blocking(move || {
+        let formats = validate_meshes(&files)?;
+        Ok::<_, ApiError>((files, formats))
+    })
+    .await
+    .map_err(anyhow::Error::from)??;
 
     let model_dir = state.config.models_dir.join(&model_id);
     let input_dir = model_dir.join("input");
@@ -171,7 +177,7 @@ pub(super) async fn create_model(
     });
     let total_epochs = epochs.unwrap_or_else(|| Preset::Cpu.setup(seed).training.epochs);
     let job_id = submission.enqueue(&job, total_epochs as i64).await?;
-    write_inputs(&input_dir, &files).await?;
+    write_inputs(&input_dir, &files, &formats).await?;
     let dir = model_dir.to_string_lossy();
     db::models::insert_if_absent(
         submission.conn(),
@@ -257,15 +263,20 @@ pub(super) fn parse_number(field: &'static str, bytes: &[u8]) -> Result<u64> {
         .map_err(|_| ApiError::invalid(field, "type", "must be a non-negative integer"))
 }
 
-/// Unpacks an archive off the executor (decompression is CPU work).
+/// Unpacks an archive into the request's `unpacked` files off the executor (decompression
+/// is CPU work), within what the request's earlier archives left of the bound.
 pub(super) async fn unpack_blocking(
     name: String,
     bytes: Bytes,
     limits: ArchiveLimits,
-) -> Result<Vec<(String, Vec<u8>)>> {
-    tokio::task::spawn_blocking(move || unpack(&name, &bytes, limits))
-        .await
-        .map_err(anyhow::Error::from)?
+    mut unpacked: Unpacked,
+) -> Result<Unpacked> {
+    tokio::task::spawn_blocking(move || {
+        unpack(&name, &bytes, limits, &mut unpacked)?;
+        Ok(unpacked)
+    })
+    .await
+    .map_err(anyhow::Error::from)?
 }
 
 fn check_model_id(id: &str) -> Result<()> {
@@ -284,29 +295,32 @@ fn check_model_id(id: &str) -> Result<()> {
     }
 }
 
-/// Parses and validates every file; the first failure names its file.
-fn validate_meshes(files: &[(String, Vec<u8>)]) -> Result<()> {
-    for (name, bytes) in files {
-        validate_mesh(&format!("files[{name}]"), name, bytes)?;
-    }
-    Ok(())
+/// Parses and validates every file; the first failure names its file. Returns each file's
+/// format as it was read.
+fn validate_meshes(files: &[(String, Vec<u8>)]) -> Result<Vec<MeshFormat>> {
+    files
+        .iter()
+        .map(|(name, bytes)| validate_mesh(&format!("files[{name}]"), name, bytes))
+        .collect()
 }
 
-/// Parses and validates one uploaded mesh (format from the extension, else sniffed); a
-/// failure is a 422 on `field` naming the reason.
-pub(super) fn validate_mesh(field: &str, name: &str, bytes: &[u8]) -> Result<TriMesh> {
+/// Parses and validates one uploaded mesh (format from the extension, else sniffed) and
+/// returns the format it was read as, under which it must be stored: a file accepted by
+/// sniffing has no extension (or an unknown one) that a reader could go by. A failure is a
+/// 422 on `field` naming the reason.
+pub(super) fn validate_mesh(field: &str, name: &str, bytes: &[u8]) -> Result<MeshFormat> {
     let format = mesh_format(name, bytes).ok_or_else(|| {
         ApiError::invalid(field, "format", format!("{name}: unknown mesh format"))
     })?;
-    let mesh = read_mesh_bytes(bytes, format, name)
+    let mesh: TriMesh = read_mesh_bytes(bytes, format, name)
         .map_err(|e| ApiError::invalid(field, "mesh", e.to_string()))?;
     mesh.validate()
         .map_err(|e| ApiError::invalid(field, "mesh", format!("{name}: {e}")))?;
-    Ok(mesh)
+    Ok(format)
 }
 
 /// The mesh format a file name's extension names, else the one its bytes announce.
-pub(super) fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
+fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
     std::path::Path::new(name)
         .extension()
         .and_then(|e| e.to_str())
@@ -314,18 +328,20 @@ pub(super) fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
         .or_else(|| MeshFormat::sniff(bytes))
 }
 
-async fn write_inputs(dir: &std::path::Path, files: &[(String, Vec<u8>)]) -> anyhow::Result<()> {
+/// Writes each file as `NNNN.<ext>` with the extension of the format validation read it as
+/// (training reads a directory by extension), so no name or path from the client reaches
+/// the disk.
+async fn write_inputs(
+    dir: &std::path::Path,
+    files: &[(String, Vec<u8>)],
+    formats: &[MeshFormat],
+) -> anyhow::Result<()> {
     use anyhow::Context;
     tokio::fs::create_dir_all(dir)
         .await
         .with_context(|| format!("cannot create {}", dir.display()))?;
-    for (i, (name, bytes)) in files.iter().enumerate() {
-        // Only the extension of the client's name is kept: no path from the client reaches the disk.
-        let ext = std::path::Path::new(name)
-            .extension()
-            .and_then(|e| e.to_str())
-            .unwrap_or("mesh");
-        let path = dir.join(format!("{i:04}.{}", ext.to_ascii_lowercase()));
+    for (i, ((_, bytes), format)) in files.iter().zip(formats).enumerate() {
+        let path = dir.join(format!("{i:04}.{}", format.extension()));
         tokio::fs::write(&path, bytes)
             .await
             .with_context(|| format!("cannot write {}", path.display()))?;

@@ -11,9 +11,11 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extractors::parse_id;
+use super::rendering::render_off_executor;
 use crate::anatomy::shape::ShapeAnatomy;
 use crate::db;
 use crate::db::cohorts::CohortRow;
+use crate::db::shapes::ShapeRow;
 use crate::engine::read_evaluation;
 use crate::report::{Report, Section, footer, render_html, sections};
 
@@ -52,8 +54,12 @@ async fn model_plot(
     Path((id, plot)): Path<(String, String)>,
 ) -> Result<Response> {
     let position = plot_position(&plot, &MODEL_PLOTS)?;
-    let mut sections = model_sections(&state, &id).await?.1;
-    Ok(svg(sections.swap_remove(position).svg))
+    let (_, inputs) = model_inputs(&state, &id).await?;
+    render_off_executor(move || {
+        let mut sections = inputs.sections();
+        Ok(svg(sections.swap_remove(position).svg))
+    })
+    .await
 }
 
 /// The model's report as one self-contained HTML page.
@@ -62,13 +68,16 @@ async fn model_plot(
     responses((status = 200, content_type = "text/html", body = String),
               (status = 404, body = Problem, content_type = "application/problem+json")))]
 async fn model_report(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response> {
-    let (facts, sections) = model_sections(&state, &id).await?;
-    Ok(html(&Report {
-        title: format!("Model {id}"),
-        facts,
-        sections,
-        footer: footer(),
-    }))
+    let (facts, inputs) = model_inputs(&state, &id).await?;
+    render_off_executor(move || {
+        Ok(html(&Report {
+            title: format!("Model {id}"),
+            facts,
+            sections: inputs.sections(),
+            footer: footer(),
+        }))
+    })
+    .await
 }
 
 /// A plot of a cohort as SVG: `pairwise-cd` (the seed paper's Fig. 3), `novelty-cd`
@@ -86,8 +95,12 @@ async fn cohort_plot(
 ) -> Result<Response> {
     let position = plot_position(&plot, &COHORT_PLOTS)?;
     let cohort = load_cohort(&state, &id).await?;
-    let mut sections = cohort_sections(&state, &cohort).await?;
-    Ok(svg(sections.swap_remove(position).svg))
+    let inputs = cohort_inputs(&state, &cohort).await?;
+    render_off_executor(move || {
+        let mut sections = inputs.sections(cohort.min_novelty)?;
+        Ok(svg(sections.swap_remove(position).svg))
+    })
+    .await
 }
 
 /// The cohort's report as one self-contained HTML page.
@@ -97,7 +110,7 @@ async fn cohort_plot(
               (status = 404, body = Problem, content_type = "application/problem+json")))]
 async fn cohort_report(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response> {
     let cohort = load_cohort(&state, &id).await?;
-    let sections = cohort_sections(&state, &cohort).await?;
+    let inputs = cohort_inputs(&state, &cohort).await?;
     let weights = match &cohort.weights {
         Some(w) => serde_json::to_string(&w.0).map_err(anyhow::Error::from)?,
         None => cohort.weighting.as_str().to_owned(),
@@ -121,19 +134,32 @@ async fn cohort_report(State(state): State<AppState>, Path(id): Path<String>) ->
         ("resolution".into(), format!("{}³", cohort.resolution)),
         ("created".into(), cohort.created_at.clone()),
     ];
-    Ok(html(&Report {
-        title: format!("Cohort {}", cohort.cohort_id),
-        facts,
-        sections,
-        footer: footer(),
-    }))
+    render_off_executor(move || {
+        Ok(html(&Report {
+            title: format!("Cohort {}", cohort.cohort_id),
+            facts,
+            sections: inputs.sections(cohort.min_novelty)?,
+            footer: footer(),
+        }))
+    })
+    .await
 }
 
-/// Facts and sections of a model report, in [`MODEL_PLOTS`] order.
-async fn model_sections(
-    state: &AppState,
-    id: &str,
-) -> Result<(Vec<(String, String)>, Vec<Section>)> {
+/// What a model's sections are drawn from (read on the executor, drawn off it).
+struct ModelInputs {
+    cds: Vec<f64>,
+    floor: Option<f64>,
+}
+
+impl ModelInputs {
+    /// The sections of a model report, in [`MODEL_PLOTS`] order.
+    fn sections(&self) -> Vec<Section> {
+        vec![sections::reconstruction_cd(&self.cds, self.floor)]
+    }
+}
+
+/// Facts of a model report and what its sections are drawn from.
+async fn model_inputs(state: &AppState, id: &str) -> Result<(Vec<(String, String)>, ModelInputs)> {
     let row = db::models::get(&state.pool, id)
         .await?
         .ok_or_else(|| ApiError::not_found("model", id))?;
@@ -155,17 +181,43 @@ async fn model_sections(
         ),
         ("registered".into(), row.created_at.clone()),
     ];
-    Ok((facts, vec![sections::reconstruction_cd(&cds, floor)]))
+    Ok((facts, ModelInputs { cds, floor }))
+}
+
+/// What a cohort's sections are drawn from: its stored pairwise matrix (JSON, parsed off the
+/// executor with the rest) and its shapes.
+struct CohortInputs {
+    matrix: Option<String>,
+    shapes: Vec<ShapeRow>,
+}
+
+/// Reads what a cohort's sections are drawn from.
+async fn cohort_inputs(state: &AppState, cohort: &CohortRow) -> Result<CohortInputs> {
+    let matrix = db::cohort_metrics::get(&state.pool, cohort.cohort_id)
+        .await?
+        .map(|row| row.matrix);
+    let shapes = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, i64::MAX, 0).await?;
+    Ok(CohortInputs { matrix, shapes })
+}
+
+impl CohortInputs {
+    /// The sections of a cohort report, in [`COHORT_PLOTS`] order.
+    fn sections(&self, min_novelty: Option<f64>) -> Result<Vec<Section>> {
+        let matrix: Vec<Vec<f64>> = match &self.matrix {
+            Some(json) => serde_json::from_str(json).map_err(anyhow::Error::from)?,
+            None => Vec::new(),
+        };
+        let shapes = &self.shapes;
+        cohort_sections(&matrix, shapes, min_novelty)
+    }
 }
 
 /// Sections of a cohort report, in [`COHORT_PLOTS`] order.
-async fn cohort_sections(state: &AppState, cohort: &CohortRow) -> Result<Vec<Section>> {
-    let matrix: Vec<Vec<f64>> = match db::cohort_metrics::get(&state.pool, cohort.cohort_id).await?
-    {
-        Some(row) => serde_json::from_str(&row.matrix).map_err(anyhow::Error::from)?,
-        None => Vec::new(),
-    };
-    let shapes = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, i64::MAX, 0).await?;
+fn cohort_sections(
+    matrix: &[Vec<f64>],
+    shapes: &[ShapeRow],
+    min_novelty: Option<f64>,
+) -> Result<Vec<Section>> {
     let novelty: Vec<f64> = shapes.iter().filter_map(|s| s.novelty_cd).collect();
     let anatomy: Vec<ShapeAnatomy> = shapes
         .iter()
@@ -176,7 +228,7 @@ async fn cohort_sections(state: &AppState, cohort: &CohortRow) -> Result<Vec<Sec
     };
     let area: Vec<f64> = shapes.iter().map(|s| s.area_mm2).collect();
     let volume: Vec<f64> = shapes.iter().map(|s| s.volume_mm3).collect();
-    let floor = sections::novelty_floor(cohort.min_novelty);
+    let floor = sections::novelty_floor(min_novelty);
     let mm = |heading: &str, what: &str, values: &[f64]| {
         sections::distribution(
             heading,
@@ -187,7 +239,7 @@ async fn cohort_sections(state: &AppState, cohort: &CohortRow) -> Result<Vec<Sec
         )
     };
     Ok(vec![
-        sections::pairwise_cd(&matrix),
+        sections::pairwise_cd(matrix),
         sections::novelty_cd(&novelty, floor.as_slice()),
         mm(
             "Annulus diameter",

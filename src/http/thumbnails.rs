@@ -51,7 +51,7 @@ async fn get_shape_thumbnail(
         (header::ETAG, etag.clone()),
         (
             header::CACHE_CONTROL,
-            "public, max-age=31536000, immutable".to_owned(),
+            super::shapes::CACHE_FOREVER.to_owned(),
         ),
     ];
     if super::shapes::if_none_match(&headers, &etag) {

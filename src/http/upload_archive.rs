@@ -1,19 +1,31 @@
 //! Zip archives of training meshes (`POST /v1/models`): the members are returned as named
-//! files for the usual mesh validation. Archives are untrusted: the entry count and the
-//! total uncompressed size are bounded while reading (declared sizes can lie), paths that
-//! would leave the archive are refused, and directories and macOS metadata are skipped.
+//! files for the usual mesh validation. Archives are untrusted: the entry count per archive
+//! and the uncompressed size of all archives of one request together are bounded while
+//! reading (declared sizes can lie; a bound per archive would let one request hold as many
+//! times the bound in memory as it sends archives), paths that would leave the archive are
+//! refused, and directories and macOS metadata are skipped.
 
 use std::io::Read;
 
 use super::error::ApiError;
 
-/// Bounds on one archive.
+/// Bounds on the archives of one request.
 #[derive(Debug, Clone, Copy)]
 pub struct ArchiveLimits {
-    /// Most entries (directories included).
+    /// Most entries of one archive (directories included).
     pub entries: usize,
-    /// Most bytes after decompression, over all members.
+    /// Most bytes after decompression, over all members of all the request's archives.
     pub bytes: usize,
+}
+
+/// The archives of one request unpacked so far: their members and how many bytes they
+/// expanded to, which the next archive's members count on.
+#[derive(Debug, Default)]
+pub struct Unpacked {
+    /// `(name, bytes)` with names `<archive>/<member path>`.
+    pub files: Vec<(String, Vec<u8>)>,
+    /// Bytes after decompression so far.
+    pub expanded: usize,
 }
 
 /// Whether `name` or the first bytes say "zip".
@@ -22,30 +34,17 @@ pub fn looks_like_zip(name: Option<&str>, bytes: &[u8]) -> bool {
         || bytes.starts_with(b"PK\x03\x04")
 }
 
-/// The mesh files in the archive `archive` (named for messages), as `(name, bytes)` with
-/// names `<archive>/<member path>`.
+/// Adds the mesh files of the archive `archive` (named for messages) to `unpacked`, within
+/// what the request's earlier archives left of `limits.bytes`.
 pub fn unpack(
     archive: &str,
     bytes: &[u8],
     limits: ArchiveLimits,
-) -> Result<Vec<(String, Vec<u8>)>, ApiError> {
+    unpacked: &mut Unpacked,
+) -> Result<(), ApiError> {
+    let mut zip = open(archive, bytes, limits)?;
     let field = format!("files[{archive}]");
-    let mut zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| {
-        ApiError::invalid(
-            &field,
-            "zip",
-            format!("{archive} is not a readable zip archive: {e}"),
-        )
-    })?;
-    if zip.len() > limits.entries {
-        return Err(ApiError::ArchiveTooLarge(format!(
-            "{archive} has {} entries; at most {} are accepted",
-            zip.len(),
-            limits.entries
-        )));
-    }
-    let mut files = Vec::new();
-    let mut total = 0usize;
+    let earlier = unpacked.expanded;
     for i in 0..zip.len() {
         let mut entry = zip.by_index(i).map_err(|e| {
             ApiError::invalid(
@@ -75,7 +74,7 @@ pub fn unpack(
         if entry.is_dir() || is_metadata(&path) {
             continue;
         }
-        let room = limits.bytes - total;
+        let room = limits.bytes - unpacked.expanded;
         let mut content = Vec::new();
         let read = (&mut entry)
             .take(room as u64 + 1)
@@ -88,15 +87,57 @@ pub fn unpack(
                 )
             })?;
         if read > room {
+            let what = if earlier > 0 {
+                format!("{archive} and the archives before it expand")
+            } else {
+                format!("{archive} expands")
+            };
             return Err(ApiError::ArchiveTooLarge(format!(
-                "{archive} expands to more than {} bytes",
+                "{what} to more than {} bytes, the bound on all archives of one request",
                 limits.bytes
             )));
         }
-        total += read;
-        files.push((member, content));
+        unpacked.expanded += read;
+        unpacked.files.push((member, content));
     }
-    Ok(files)
+    Ok(())
+}
+
+/// How many mesh files `unpack` would return, read from the archive's directory without
+/// decompressing anything (to refuse an archive holding the wrong number of files first).
+pub fn count_files(archive: &str, bytes: &[u8], limits: ArchiveLimits) -> Result<usize, ApiError> {
+    let zip = open(archive, bytes, limits)?;
+    Ok(zip
+        .file_names()
+        .filter(|name| match name {
+            Ok(name) => !name.ends_with('/') && !is_metadata(std::path::Path::new(name.as_ref())),
+            // `unpack` refuses it, naming the archive; counted so a count rule cannot hide that.
+            Err(_) => true,
+        })
+        .count())
+}
+
+/// Opens an archive, refusing one that is unreadable or has too many entries.
+fn open<'a>(
+    archive: &str,
+    bytes: &'a [u8],
+    limits: ArchiveLimits,
+) -> Result<zip::ZipArchive<std::io::Cursor<&'a [u8]>>, ApiError> {
+    let zip = zip::ZipArchive::new(std::io::Cursor::new(bytes)).map_err(|e| {
+        ApiError::invalid(
+            format!("files[{archive}]"),
+            "zip",
+            format!("{archive} is not a readable zip archive: {e}"),
+        )
+    })?;
+    if zip.len() > limits.entries {
+        return Err(ApiError::ArchiveTooLarge(format!(
+            "{archive} has {} entries; at most {} are accepted",
+            zip.len(),
+            limits.entries
+        )));
+    }
+    Ok(zip)
 }
 
 /// macOS resource forks and Finder files that archivers add next to the real files.

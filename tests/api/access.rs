@@ -127,3 +127,50 @@ fn the_configuration_never_shows_a_key() {
     assert!(!shown.contains(FIRST), "{shown}");
     assert!(shown.contains("redacted"));
 }
+
+/// `aortagen serve` with `AORTAGEN_API_KEYS` set to `value`: its exit status and output,
+/// or `None` if it was still running (serving open) when given up on.
+fn serve_with_keys(value: &str) -> Option<(std::process::ExitStatus, String)> {
+    use std::process::{Command, Stdio};
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("serve.log");
+    let file = std::fs::File::create(&log).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_aortagen"))
+        .arg("serve")
+        .env("AORTAGEN_API_KEYS", value)
+        .env_remove("AORTAGEN_API_KEYS_FILE")
+        .env("AORTAGEN_BIND", "127.0.0.1:0")
+        .env(
+            "AORTAGEN_DATABASE_URL",
+            format!("sqlite://{}", dir.path().join("a.db").display()),
+        )
+        .env("AORTAGEN_MODELS_DIR", dir.path().join("models"))
+        .stdin(Stdio::null())
+        .stdout(file.try_clone().unwrap())
+        .stderr(file)
+        .spawn()
+        .unwrap();
+    // A guard against a server that starts and never exits, not a timing assertion.
+    for _ in 0..600 {
+        if let Some(status) = child.try_wait().unwrap() {
+            return Some((status, std::fs::read_to_string(&log).unwrap()));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    None
+}
+
+#[test]
+fn a_blank_key_variable_stops_the_service_from_starting_open() {
+    for value in ["", " ", ",", " , ,"] {
+        let (status, log) = serve_with_keys(value)
+            .unwrap_or_else(|| panic!("AORTAGEN_API_KEYS={value:?}: the service ran open"));
+        assert!(!status.success(), "{value:?}: {status}");
+        assert!(
+            log.contains("AORTAGEN_API_KEYS") && log.contains("holds no key"),
+            "{value:?}: {log}"
+        );
+    }
+}

@@ -209,3 +209,75 @@ async fn deleting_a_cohort_removes_its_shapes_metrics_and_job() {
         assert_eq!(app.count(table).await, 0, "{table}");
     }
 }
+
+#[tokio::test]
+async fn metrics_list_the_shape_ids_without_reading_any_mesh() {
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(3, 2)).await;
+    app.run_pending_jobs().await;
+    let path = format!("/v1/cohorts/{id}/metrics?matrix=true");
+    let before = app.get(&path).await.json();
+    let ids: Vec<i64> =
+        sqlx::query_scalar("select shape_id from shape where cohort_id = ? order by shape_index")
+            .bind(id)
+            .fetch_all(&app.state.pool)
+            .await
+            .unwrap();
+    assert_eq!(before["shape_ids"], json!(ids));
+
+    // Without the mesh column a query that reads it fails: the endpoint must not need it.
+    sqlx::query("alter table shape drop column mesh")
+        .execute(&app.state.pool)
+        .await
+        .unwrap();
+    let after = app.get(&path).await;
+    assert_eq!(
+        after.status,
+        StatusCode::OK,
+        "{}",
+        String::from_utf8_lossy(&after.body)
+    );
+    assert_eq!(after.json(), before);
+}
+
+/// A cohort's job, cohort and shape ids, read back from the service.
+async fn cohort_ids(app: &crate::helpers::TestApp, cohort: i64) -> (i64, i64, Vec<i64>) {
+    let view = app.get(&format!("/v1/cohorts/{cohort}")).await.json();
+    let shapes: Vec<i64> =
+        sqlx::query_scalar("select shape_id from shape where cohort_id = ? order by shape_index")
+            .bind(cohort)
+            .fetch_all(&app.state.pool)
+            .await
+            .unwrap();
+    (cohort, view["job_id"].as_i64().unwrap(), shapes)
+}
+
+#[tokio::test]
+async fn ids_of_a_deleted_cohort_its_job_and_shapes_are_never_given_again() {
+    let app = spawn_app().await;
+    let first = app.create_cohort_ok(&cohort_body(2, 2)).await;
+    app.run_pending_jobs().await;
+    let (cohort, job, shapes) = cohort_ids(&app, first).await;
+    let mesh_path = format!("/v1/shapes/{}/mesh", shapes[0]);
+    let mesh = app.get(&mesh_path).await;
+    assert_eq!(mesh.status, StatusCode::OK);
+    let etag = mesh.header("etag").unwrap();
+    assert!(etag.starts_with('"'), "a strong ETag: {etag}");
+    assert!(mesh.header("cache-control").unwrap().contains("immutable"));
+    let r = app
+        .request(Method::DELETE, &format!("/v1/cohorts/{first}"), &[], "")
+        .await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT);
+
+    let second = app.create_cohort_ok(&cohort_body(2, 2)).await;
+    app.run_pending_jobs().await;
+    let (new_cohort, new_job, new_shapes) = cohort_ids(&app, second).await;
+    assert!(new_cohort > cohort, "cohort {new_cohort} after {cohort}");
+    assert!(new_job > job, "job {new_job} after {job}");
+    assert!(
+        new_shapes.iter().all(|s| !shapes.contains(s)),
+        "{new_shapes:?} reuses {shapes:?}"
+    );
+    // The URL a cache may hold as immutable names nothing now, not the new cohort's shape.
+    assert_eq!(app.get(&mesh_path).await.status, StatusCode::NOT_FOUND);
+}

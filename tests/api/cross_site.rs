@@ -177,3 +177,91 @@ async fn a_valid_key_does_not_let_another_site_write() {
     let ok = post(&app, "/v1/cohorts", &[json_type, auth], &body).await;
     assert_eq!(ok.status, StatusCode::ACCEPTED);
 }
+
+/// A concrete path for a route template, naming resources that exist where there are any.
+fn concrete(template: &str, cohort: i64, job: i64) -> String {
+    let id = if template.starts_with("/v1/models/") {
+        crate::helpers::MODEL.to_owned()
+    } else if template.starts_with("/v1/cohorts/") {
+        cohort.to_string()
+    } else if template.starts_with("/v1/jobs/") {
+        job.to_string()
+    } else {
+        "1".to_owned()
+    };
+    template.replace("{id}", &id)
+}
+
+#[tokio::test]
+async fn form_posts_from_another_site_reach_no_state_changing_route_without_keys() {
+    let app = spawn_app().await;
+    assert!(!app.state.access.is_enabled(), "no key configured");
+    let cohort = queued_cohort(&app).await;
+    let job = app.get(&format!("/v1/cohorts/{cohort}")).await.json()["job_id"]
+        .as_i64()
+        .unwrap();
+    let counts = async || {
+        let mut counts = Vec::new();
+        for table in ["model", "job", "cohort", "shape", "anchor"] {
+            counts.push(app.count(table).await);
+        }
+        counts
+    };
+    let before = counts().await;
+    // Every state-changing operation the service documents, so a new route is covered too.
+    let doc = app.get("/openapi.json").await.json();
+    let (multipart_type, multipart_body) = multipart(&[("id", None, b"planted".to_vec())]);
+    let mut checked = 0;
+    let mut takes_forms = Vec::new();
+    for (template, item) in doc["paths"].as_object().unwrap() {
+        for method in ["post", "put", "patch", "delete"] {
+            let Some(op) = item.get(method) else { continue };
+            let path = concrete(template, cohort, job);
+            let verb = Method::from_bytes(method.to_uppercase().as_bytes()).unwrap();
+            let send = async |headers: &[(&str, &str)], body: Vec<u8>| {
+                app.request(verb.clone(), &path, headers, body).await
+            };
+            // What a current browser sends with a cross-site form or no-cors fetch.
+            let r = send(
+                &[
+                    ("content-type", "application/x-www-form-urlencoded"),
+                    ("origin", EVIL),
+                    ("sec-fetch-site", "cross-site"),
+                ],
+                b"a=1".to_vec(),
+            )
+            .await;
+            assert_refused(&r, "Sec-Fetch-Site");
+            let r = send(
+                &[("content-type", &multipart_type), ("origin", EVIL)],
+                multipart_body.clone(),
+            )
+            .await;
+            assert_refused(&r, "Origin");
+            // A browser that sends neither: only a type the endpoint takes gets through.
+            let accepted = op["requestBody"]["content"]
+                .as_object()
+                .map(|c| c.keys().cloned().collect::<Vec<_>>())
+                .unwrap_or_default();
+            for form in ["application/x-www-form-urlencoded", "text/plain"] {
+                assert!(!accepted.iter().any(|t| t == form), "{method} {template}");
+                let r = send(&[("content-type", form)], b"a=1".to_vec()).await;
+                assert_refused(&r, "Content-Type");
+            }
+            if accepted.iter().any(|t| t == "multipart/form-data") {
+                takes_forms.push(format!("{method} {template}"));
+            } else {
+                let r = send(&[("content-type", &multipart_type)], multipart_body.clone()).await;
+                assert_refused(&r, "Content-Type");
+            }
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 8, "the documented state-changing operations");
+    // Uploads take multipart bodies from clients that are not browsers (curl -F): a form
+    // with neither Origin nor Sec-Fetch-Site is theirs, which no current browser sends.
+    takes_forms.sort();
+    assert_eq!(takes_forms, ["post /v1/models", "post /v1/models/{id}/fit"]);
+    assert_eq!(counts().await, before, "nothing was created or deleted");
+    assert_eq!(status_of(&app, cohort).await, "queued");
+}

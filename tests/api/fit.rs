@@ -404,6 +404,50 @@ async fn an_anchor_is_deleted_unless_it_is_fitting_or_used_by_a_cohort() {
     );
 }
 
+#[tokio::test]
+async fn an_archive_of_several_files_is_refused_before_it_is_decompressed() {
+    use crate::helpers::MAX_ARCHIVE_BYTES;
+    let app = spawn_app().await;
+    // Its second member alone expands past the bound: only counting first answers 422.
+    let archive = crate::models::zip_of(&[
+        ("a.stl", ellipsoid_stl(AXES)),
+        ("b.obj", vec![b' '; MAX_ARCHIVE_BYTES + 1]),
+    ]);
+    let r = fit(&app, MODEL, &[("file", Some("two.zip"), archive)]).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY, "{}", text(&r));
+    let p = r.json();
+    assert_eq!(
+        (p["field"].as_str(), p["rule"].as_str()),
+        (Some("file"), Some("count"))
+    );
+    assert!(
+        p["detail"].as_str().unwrap().contains("got 2 in two.zip"),
+        "{p}"
+    );
+
+    let one = crate::models::zip_of(&[("a.stl", ellipsoid_stl(AXES))]);
+    let r = fit(&app, MODEL, &[("file", Some("one.zip"), one)]).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
+}
+
+#[tokio::test]
+async fn a_deleted_anchors_id_is_not_given_again() {
+    let app = spawn_app().await;
+    let r = fit(&app, MODEL, &[("file", Some("p.stl"), ellipsoid_stl(AXES))]).await;
+    let anchor = r.json()["anchor_id"].as_i64().unwrap();
+    app.run_pending_jobs().await;
+    let path = format!("/v1/anchors/{anchor}");
+    assert_eq!(
+        app.request(Method::DELETE, &path, &[], "").await.status,
+        StatusCode::NO_CONTENT
+    );
+    let again = fit(&app, MODEL, &[("file", Some("p.stl"), ellipsoid_stl(AXES))]).await;
+    assert_eq!(again.status, StatusCode::ACCEPTED);
+    let next = again.json()["anchor_id"].as_i64().unwrap();
+    assert!(next > anchor, "anchor {next} after {anchor}");
+    assert_eq!(app.get(&path).await.status, StatusCode::NOT_FOUND);
+}
+
 fn cohort_with_anchors(anchors: &[i64]) -> Value {
     json!({
         "model_id": MODEL, "count": 3, "arity": 2, "seed": 7, "resolution": 64,

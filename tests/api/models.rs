@@ -118,9 +118,42 @@ async fn a_bad_upload_is_refused_naming_the_file_and_nothing_is_stored() {
     assert_eq!(app.count("job").await, 0);
 }
 
+fn ply() -> Vec<u8> {
+    write_mesh(&uv_sphere(6, 8), MeshFormat::Ply, &MeshMetadata::new("mm")).unwrap()
+}
+
+#[tokio::test]
+async fn meshes_recognised_by_content_are_stored_so_training_reads_every_one() {
+    let app = spawn_app().await;
+    let parts = [
+        ("id", None, b"sniffed".to_vec()),
+        ("files", Some("no-extension"), ply()),
+        ("files", Some("scan.mesh"), ply()),
+        ("files", Some("c.STL"), stl()),
+    ];
+    let r = app.upload_model(&parts).await;
+    assert_eq!(
+        r.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    assert_eq!(r.json()["shapes"], 3);
+    let input = app.state.config.models_dir.join("sniffed").join("input");
+    let mut stored: Vec<String> = std::fs::read_dir(&input)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    stored.sort();
+    assert_eq!(stored, ["0000.ply", "0001.ply", "0002.stl"]);
+    // What the training job reads: every accepted mesh, none left behind.
+    let read = aortagen::sdf::data::read_mesh_directory(&input).unwrap();
+    assert_eq!(read.len(), 3);
+}
+
 /// A zip archive of `(name, bytes)` members, deflated, with a directory and macOS metadata
 /// that the service must skip.
-fn zip_of(members: &[(&str, Vec<u8>)]) -> Vec<u8> {
+pub fn zip_of(members: &[(&str, Vec<u8>)]) -> Vec<u8> {
     use std::io::Write;
     let mut zip = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
     let options = zip::write::SimpleFileOptions::default()
@@ -274,4 +307,58 @@ async fn zip_members_whose_path_leaves_the_archive_are_refused() {
     let r = post_zip(&app, "", archive).await;
     assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
     assert_eq!(r.json()["field"], "files[upload.zip/../../etc/b.stl]");
+}
+
+/// An OBJ sphere padded with comment lines to `size` bytes (comments are ignored by readers,
+/// and deflate to almost nothing inside an archive).
+fn padded_obj(size: usize) -> Vec<u8> {
+    let mut obj = write_mesh(&uv_sphere(6, 8), MeshFormat::Obj, &MeshMetadata::new("mm")).unwrap();
+    let line = b"# padding padding padding padding padding padding padding padding\n";
+    while obj.len() + line.len() <= size {
+        obj.extend_from_slice(line);
+    }
+    obj
+}
+
+#[tokio::test]
+async fn the_expanded_size_bound_covers_all_archives_of_one_request() {
+    use crate::helpers::MAX_ARCHIVE_BYTES;
+    let app = spawn_app().await;
+    // Each archive alone is within the bound; together they expand past it.
+    let part = || zip_of(&[("m.obj", padded_obj(MAX_ARCHIVE_BYTES * 6 / 10))]);
+    let within = app
+        .upload_model(&[
+            ("id", None, b"one-archive".to_vec()),
+            ("files", Some("a.zip"), part()),
+            ("files", Some("b.stl"), stl()),
+        ])
+        .await;
+    assert_eq!(
+        within.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&within.body)
+    );
+    let r = app
+        .upload_model(&[
+            ("id", None, b"two-archives".to_vec()),
+            ("files", Some("a.zip"), part()),
+            ("files", Some("b.zip"), part()),
+        ])
+        .await;
+    assert_eq!(
+        r.status,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    let detail = r.json()["detail"].as_str().unwrap().to_owned();
+    assert!(
+        detail.contains("b.zip and the archives before it"),
+        "{detail}"
+    );
+    assert_eq!(
+        app.get("/v1/models/two-archives").await.status,
+        StatusCode::NOT_FOUND
+    );
 }

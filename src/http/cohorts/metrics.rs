@@ -16,6 +16,7 @@ use crate::db;
 use crate::http::AppState;
 use crate::http::error::{ApiError, Problem, Result};
 use crate::http::extractors::{ApiQuery, parse_id};
+use crate::http::rendering::render_off_executor;
 use crate::jobs::stats::{PairwiseSummary, ValueSummary, summarize_values};
 
 /// Options of the metrics endpoint.
@@ -146,40 +147,40 @@ pub(super) async fn get_cohort_metrics(
             cohort.status
         )));
     };
-    let matrix: Vec<Vec<f64>> = serde_json::from_str(&row.matrix).map_err(anyhow::Error::from)?;
-    let summary: Option<PairwiseSummary> =
-        serde_json::from_str(&row.summary).map_err(anyhow::Error::from)?;
-    let shape_ids: Vec<i64> = db::shapes::cohort_meshes(&state.pool, cohort.cohort_id)
-        .await?
-        .into_iter()
-        .map(|s| s.shape_id)
-        .collect();
+    let shape_ids = db::shapes::cohort_shape_ids(&state.pool, cohort.cohort_id).await?;
     let science = db::shapes::cohort_science(&state.pool, cohort.cohort_id).await?;
     let training_shapes = match db::models::get(&state.pool, &cohort.model_id).await? {
         Some(model) => model.info().map_or(0, |i| i.training_shape_count()),
         None => 0,
     };
-    let novelty = novelty_metrics(&cohort, &science, training_shapes);
     let with_matrix = q.matrix.unwrap_or(false);
-    if csv {
-        let body = if with_matrix {
-            matrix_csv(&shape_ids, &matrix)
-        } else {
-            pairs_csv(&shape_ids, &matrix)
-        };
-        return Ok(([(header::CONTENT_TYPE, "text/csv; charset=utf-8")], body).into_response());
-    }
-    Ok(Json(CohortMetrics {
-        cohort_id: cohort.cohort_id,
-        measure: MEASURE,
-        shape_ids,
-        summary,
-        matrix: with_matrix.then_some(matrix),
-        computed_at: row.created_at,
-        novelty,
-        anatomy: anatomy_metrics(&science, cohort.targets.as_ref().map(|t| &t.0)),
+    // The matrix is n × n: parsed and written out off the executor.
+    render_off_executor(move || {
+        let matrix: Vec<Vec<f64>> =
+            serde_json::from_str(&row.matrix).map_err(anyhow::Error::from)?;
+        let summary: Option<PairwiseSummary> =
+            serde_json::from_str(&row.summary).map_err(anyhow::Error::from)?;
+        if csv {
+            let body = if with_matrix {
+                matrix_csv(&shape_ids, &matrix)
+            } else {
+                pairs_csv(&shape_ids, &matrix)
+            };
+            return Ok(([(header::CONTENT_TYPE, "text/csv; charset=utf-8")], body).into_response());
+        }
+        Ok(Json(CohortMetrics {
+            cohort_id: cohort.cohort_id,
+            measure: MEASURE,
+            shape_ids,
+            summary,
+            matrix: with_matrix.then_some(matrix),
+            computed_at: row.created_at,
+            novelty: novelty_metrics(&cohort, &science, training_shapes),
+            anatomy: anatomy_metrics(&science, cohort.targets.as_ref().map(|t| &t.0)),
+        })
+        .into_response())
     })
-    .into_response())
+    .await
 }
 
 fn novelty_metrics(
