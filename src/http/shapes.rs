@@ -232,6 +232,9 @@ async fn get_shape(
     }))
 }
 
+/// The units a mesh is served in, the default first: millimetres, or the shape's unit ball.
+pub const UNITS: [&str; 2] = ["mm", "unit"];
+
 /// Download options.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
@@ -286,11 +289,12 @@ async fn get_shape_mesh(
     headers: HeaderMap,
 ) -> Result<Response> {
     let request = MeshRequest::parse(q.format.as_deref(), &sim.params()).map_err(param_error)?;
-    let units = match q.units.as_deref() {
-        None | Some("mm") => "mm",
-        Some("unit") => "unit",
-        Some(u) => {
-            let message = format!("unknown units {u:?}; use mm or unit");
+    let given = q.units.as_deref().unwrap_or(UNITS[0]);
+    let units = match UNITS.iter().find(|known| **known == given) {
+        Some(known) => *known,
+        None => {
+            let u = given;
+            let message = format!("unknown units {u:?}; use {}", UNITS.join(" or "));
             return Err(ApiError::BadRequest {
                 field: Some("units".into()),
                 message,

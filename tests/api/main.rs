@@ -8,6 +8,7 @@ mod cohorts;
 mod conditioned;
 mod conformance;
 mod connections;
+mod contract;
 mod crash_safety;
 mod cross_site;
 mod dashboard;

@@ -214,11 +214,17 @@ async fn list_cohorts(
     }))
 }
 
+/// Page sizes a listing accepts.
+pub const PAGE_LIMIT: std::ops::RangeInclusive<i64> = 1..=100;
+/// Page size when `limit` is absent.
+pub const DEFAULT_PAGE_LIMIT: i64 = 20;
+
 /// Validates paging parameters (shared with the shapes listing).
 pub fn page(limit: Option<i64>, offset: Option<i64>) -> Result<(i64, i64)> {
-    let limit = limit.unwrap_or(20);
-    if !(1..=100).contains(&limit) {
-        let message = format!("limit must be between 1 and 100, got {limit}");
+    let limit = limit.unwrap_or(DEFAULT_PAGE_LIMIT);
+    if !PAGE_LIMIT.contains(&limit) {
+        let (lo, hi) = (PAGE_LIMIT.start(), PAGE_LIMIT.end());
+        let message = format!("limit must be between {lo} and {hi}, got {limit}");
         return Err(ApiError::BadRequest {
             field: Some("limit".into()),
             message,
