@@ -24,6 +24,7 @@ mod openapi;
 mod pipeline;
 mod process;
 mod reports;
+mod resume;
 mod science;
 mod shapes;
 mod simulation;

@@ -32,6 +32,7 @@ pub(super) fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(create_cohort, list_cohorts))
         .routes(routes!(get_cohort, delete_cohort))
         .routes(routes!(cancel_cohort))
+        .routes(routes!(retry_cohort))
         .routes(routes!(metrics::get_cohort_metrics))
 }
 
@@ -280,6 +281,37 @@ async fn cancel_cohort(
     }
     let cohort = load(&state, cohort.cohort_id, &id).await?;
     Ok((StatusCode::ACCEPTED, Json(CohortView::from_row(cohort))))
+}
+
+/// Resumes a failed or cancelled cohort: its stored shapes stay and the missing ones are
+/// generated from the same seeds, so the result equals an uninterrupted run.
+#[utoipa::path(post, path = "/v1/cohorts/{id}/retry", tag = "cohorts",
+    params(("id" = i64, Path, description = "Cohort id")),
+    responses((status = 202, body = CohortView, description = "Queued again; `Location` names the cohort"),
+              (status = 404, body = Problem, content_type = "application/problem+json"),
+              (status = 409, body = Problem, content_type = "application/problem+json", description = "Queued, running or succeeded: only a failed or cancelled cohort can be retried"),
+              (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After")))]
+async fn retry_cohort(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response> {
+    let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
+    let mut submission = state.queue.begin().await?;
+    if !submission.requeue(cohort.job_id).await? {
+        drop(submission);
+        // Read again: the state may have changed since the cohort was loaded.
+        let status = db::jobs::get(&state.pool, cohort.job_id)
+            .await?
+            .map_or(cohort.status, |job| job.status);
+        let msg =
+            format!("cohort {id} is {status}; only a failed or cancelled cohort can be retried");
+        return Err(ApiError::Conflict(msg));
+    }
+    submission.commit().await?;
+    tracing::info!(
+        cohort_id = cohort.cohort_id,
+        job_id = cohort.job_id,
+        "cohort queued again"
+    );
+    let cohort = load(&state, cohort.cohort_id, &id).await?;
+    Ok(accepted(cohort, false))
 }
 
 /// Deletes a cohort with its shapes and metrics; a running cohort must be cancelled first.
