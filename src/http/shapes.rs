@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
-use super::cohorts::{load as load_cohort, page};
+use super::cohorts::{load as load_cohort, next_offset, page};
 use super::error::{ApiError, Problem, Result};
 use super::extractors::{ApiQuery, parse_id};
 use super::mesh_cache::MeshKey;
@@ -206,7 +206,7 @@ async fn list_cohort_shapes(
     let cohort = load_cohort(&state, parse_id("cohort", &id)?, &id).await?;
     let (limit, offset) = page(q.limit, q.offset)?;
     let rows = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, limit, offset).await?;
-    let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
+    let next_offset = next_offset(rows.len(), limit, offset);
     let items = rows.into_iter().map(ShapeView::from_row).collect();
     Ok(Json(ShapePage { items, next_offset }))
 }

@@ -448,3 +448,18 @@ async fn every_bounded_cohort_field_is_accepted_inside_and_refused_outside() {
         assert!(bounded.contains(e), "the document states no rule of {e}");
     }
 }
+
+#[tokio::test]
+async fn the_largest_documented_offset_is_answered_without_a_next_page() {
+    let (app, cohort, _) = app_with_a_cohort().await;
+    for path in [
+        "/v1/cohorts".to_owned(),
+        format!("/v1/cohorts/{cohort}/shapes"),
+    ] {
+        let r = app
+            .get(&format!("{path}?limit=1&offset={}", i64::MAX))
+            .await;
+        assert_eq!(r.status, StatusCode::OK, "{path}: {}", describe(&r));
+        assert!(r.json()["next_offset"].is_null(), "{path}");
+    }
+}

@@ -208,7 +208,7 @@ async fn list_cohorts(
     };
     let (limit, offset) = page(f.limit, f.offset)?;
     let rows = db::cohorts::list(&state.pool, f.model_id.as_deref(), status, limit, offset).await?;
-    let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
+    let next_offset = next_offset(rows.len(), limit, offset);
     Ok(Json(CohortPage {
         items: rows.into_iter().map(CohortView::from_row).collect(),
         next_offset,
@@ -219,6 +219,12 @@ async fn list_cohorts(
 pub const PAGE_LIMIT: std::ops::RangeInclusive<i64> = 1..=100;
 /// Page size when `limit` is absent.
 pub const DEFAULT_PAGE_LIMIT: i64 = 20;
+
+/// The offset of the page after a full one; none after a short page or past the largest
+/// offset.
+pub fn next_offset(rows: usize, limit: i64, offset: i64) -> Option<i64> {
+    (rows as i64 == limit).then(|| offset.checked_add(limit))?
+}
 
 /// Validates paging parameters (shared with the shapes listing).
 pub fn page(limit: Option<i64>, offset: Option<i64>) -> Result<(i64, i64)> {
