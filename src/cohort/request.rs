@@ -11,6 +11,11 @@ use super::targets::{DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, TargetError, Target
 use super::weights::{WeightChoice, WeightError, Weighting};
 use super::{DEFAULT_RESOLUTION, RESOLUTION_RANGE, Selection};
 
+/// Fewest shapes a cohort may have.
+pub const MIN_COUNT: i64 = 1;
+/// Fewest members a convex combination mixes.
+pub const MIN_CONVEX_ARITY: i64 = 2;
+
 /// A cohort request as it arrives, before its rules are checked. `A` names an anchor: an id
 /// in the service, a name in a model directory's `anchors.json` on the command line.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -239,8 +244,8 @@ fn check_arity(
             let msg = "is required by the convex sampler (training shapes mixed per shape)";
             Err(RequestError::new("arity", "required", msg))
         }
-        Some(a) if a < 2 => {
-            let msg = format!("must be at least 2, got {a}");
+        Some(a) if a < MIN_CONVEX_ARITY => {
+            let msg = format!("must be at least {MIN_CONVEX_ARITY}, got {a}");
             Err(RequestError::new("arity", "range", msg))
         }
         Some(a) => Ok(usize::try_from(a).unwrap_or(usize::MAX)),
@@ -261,8 +266,8 @@ fn check_convex_only<A>(fields: &CohortFields<A>) -> Result<(), RequestError> {
 }
 
 fn check_count(count: i64, max_count: u32) -> Result<u32, RequestError> {
-    if !(1..=i64::from(max_count)).contains(&count) {
-        let msg = format!("must be between 1 and {max_count}, got {count}");
+    if !(MIN_COUNT..=i64::from(max_count)).contains(&count) {
+        let msg = format!("must be between {MIN_COUNT} and {max_count}, got {count}");
         return Err(RequestError::new("count", "range", msg));
     }
     Ok(count as u32)

@@ -96,7 +96,7 @@ pub async fn enqueue(
 pub async fn claim_next(pool: &SqlitePool) -> sqlx::Result<Option<ClaimedJob>> {
     sqlx::query_as(
         "update job set status = 'running', attempts = attempts + 1,
-             claim_progress = progress_done,
+             claim_progress = progress_done, claim_setup = setup_done,
              started_at = coalesce(started_at, strftime('%Y-%m-%dT%H:%M:%fZ', 'now')),
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
          where job_id = (select job_id from job where status = 'queued' order by job_id limit 1)
@@ -107,14 +107,15 @@ pub async fn claim_next(pool: &SqlitePool) -> sqlx::Result<Option<ClaimedJob>> {
 }
 
 /// At startup: jobs left `running` by a stopped process go back to the queue. An
-/// interrupted run that committed progress (`progress_done` grew since the claim) clears the
-/// job's stall count; one that did not adds to it, and a job stalled `max_attempts` times in
+/// interrupted run that committed progress (`progress_done` or its stored setup,
+/// `setup_done`, grew since the claim) clears the job's stall count; one that did not adds to it, and a job stalled `max_attempts` times in
 /// a row fails, so a job that keeps killing the process cannot loop forever while a long
 /// job on a host that is restarted often still finishes. Returns (re-queued, failed).
 pub async fn requeue_interrupted(pool: &SqlitePool, max_attempts: i64) -> sqlx::Result<(u64, u64)> {
     let mut tx = pool.begin_with(super::BEGIN_WRITE).await?;
     sqlx::query(
-        "update job set stalled_attempts = case when progress_done > claim_progress then 0
+        "update job set stalled_attempts = case when progress_done > claim_progress
+                                                     or setup_done > claim_setup then 0
                                                 else stalled_attempts + 1 end
          where status = 'running'",
     )
@@ -142,6 +143,22 @@ pub async fn requeue_interrupted(pool: &SqlitePool, max_attempts: i64) -> sqlx::
     .rows_affected();
     tx.commit().await?;
     Ok((requeued, failed))
+}
+
+/// Puts a failed or cancelled job back in the queue (inside the caller's transaction, the
+/// one [`crate::jobs::Submission`] opened), its attempt and stall counts cleared; returns
+/// whether it was in such a state.
+pub async fn requeue_finished(conn: &mut SqliteConnection, job_id: i64) -> sqlx::Result<bool> {
+    let done = sqlx::query(
+        "update job set status = 'queued', cancel_requested = 0, error = null,
+             finished_at = null, attempts = 0, stalled_attempts = 0,
+             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = ? and status in ('failed', 'cancelled')",
+    )
+    .bind(job_id)
+    .execute(conn)
+    .await?;
+    Ok(done.rows_affected() == 1)
 }
 
 /// Puts a running job back in the queue (graceful shutdown in the middle of it).

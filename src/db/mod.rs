@@ -9,6 +9,7 @@ pub mod ids;
 pub mod job_changes;
 pub mod jobs;
 pub mod models;
+pub mod novelty_surfaces;
 pub mod shapes;
 pub mod simulations;
 pub mod states;

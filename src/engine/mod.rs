@@ -202,6 +202,22 @@ pub trait Engine: Send + Sync + 'static {
         cancel: &AtomicBool,
     ) -> anyhow::Result<Arc<NoveltyReference>>;
 
+    /// Training shape `index` as the model reconstructs it at `resolution` (unit-ball
+    /// coordinates): one surface of the novelty reference, which a caller may store and
+    /// pass back to [`Engine::novelty_reference_from`] instead of recomputing it. Returns
+    /// early with an error once `cancel` becomes true.
+    fn training_surface(
+        &self,
+        model_dir: &Path,
+        index: usize,
+        resolution: usize,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<TriMesh>;
+
+    /// The novelty reference over `surfaces`, the training surfaces in index order, sampled
+    /// exactly as [`Engine::novelty_reference`] samples them.
+    fn novelty_reference_from(&self, surfaces: &[TriMesh]) -> anyhow::Result<NoveltyReference>;
+
     /// Pairwise Chamfer distance matrix (unit-ball coordinates) over a cohort's meshes.
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>>;
 
@@ -275,6 +291,20 @@ impl Engine for UnavailableEngine {
         _: usize,
         _: &AtomicBool,
     ) -> anyhow::Result<Arc<NoveltyReference>> {
+        self.refuse()
+    }
+
+    fn training_surface(
+        &self,
+        _: &Path,
+        _: usize,
+        _: usize,
+        _: &AtomicBool,
+    ) -> anyhow::Result<TriMesh> {
+        self.refuse()
+    }
+
+    fn novelty_reference_from(&self, _: &[TriMesh]) -> anyhow::Result<NoveltyReference> {
         self.refuse()
     }
 

@@ -22,7 +22,7 @@ use crate::sdf::data::DataSource;
 use crate::sdf::data::holdout::HoldoutSpec;
 use crate::sdf::inference::evaluation::EvaluationReport;
 use crate::sdf::inference::mixing::{AnchorPart, Mixture, anchored_latent};
-use crate::sdf::inference::novelty::{NoveltyReference, training_surfaces};
+use crate::sdf::inference::novelty::{NoveltyReference, training_surface, training_surfaces};
 use crate::sdf::inference::reconstruct::{ExtractionMethod, reconstruct};
 use crate::sdf::store::LoadedModel;
 use crate::sdf::store::manifest::MANIFEST_FILE;
@@ -199,6 +199,35 @@ impl Engine for SdfEngine {
         let reference = Arc::new(NoveltyReference::new(&surfaces, self.chamfer_points)?);
         lock_references()?.insert(key, reference.clone());
         Ok(reference)
+    }
+
+    fn training_surface(
+        &self,
+        model_dir: &Path,
+        index: usize,
+        resolution: usize,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<TriMesh> {
+        let cached = self.model(model_dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        let latent = cached
+            .latents
+            .get(index)
+            .with_context(|| format!("the model has no training shape {index}"))?;
+        Ok(training_surface(
+            &cached.model,
+            latent,
+            index,
+            resolution,
+            self.extraction,
+            cancel,
+        )?)
+    }
+
+    fn novelty_reference_from(&self, surfaces: &[TriMesh]) -> anyhow::Result<NoveltyReference> {
+        Ok(NoveltyReference::new(surfaces, self.chamfer_points)?)
     }
 
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>> {

@@ -149,11 +149,26 @@ where
         Query::<T>::from_request_parts(parts, state)
             .await
             .map(|Query(q)| ApiQuery(q))
-            .map_err(|e| ApiError::BadRequest {
-                field: None,
-                message: e.body_text(),
+            .map_err(|e| {
+                let message = e.body_text();
+                ApiError::BadRequest {
+                    field: query_field(&message).map(str::to_owned),
+                    message,
+                }
             })
     }
+}
+
+/// The parameter a query-string rejection is about: axum reports the path of the value
+/// that failed to deserialise before its message (`…query string: seed: invalid digit`).
+fn query_field(message: &str) -> Option<&str> {
+    let rest = message.strip_prefix("Failed to deserialize query string: ")?;
+    let (field, _) = rest.split_once(": ")?;
+    let plain = !field.is_empty()
+        && field
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    plain.then_some(field)
 }
 
 /// Parses a numeric id from a path segment; anything else cannot exist (404).

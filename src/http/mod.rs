@@ -5,6 +5,7 @@ pub mod access;
 pub mod anchors;
 pub mod cohort_meshes;
 pub mod cohorts;
+pub mod contract;
 pub mod cross_site;
 pub mod dashboard;
 pub mod error;

@@ -24,7 +24,7 @@ use crate::jobs::training::TrainingPayload;
 use crate::sdf::training::config::Preset;
 
 /// Most epochs a training request may ask for (the paper preset's count).
-const MAX_EPOCHS: u64 = 5000;
+pub const MAX_EPOCHS: u64 = 5000;
 
 /// Accepted upload (documentation of the multipart form).
 #[derive(Debug, utoipa::ToSchema)]
@@ -200,16 +200,19 @@ pub(super) async fn create_model(
     ))
 }
 
+/// Fewest meshes a `holdout` may keep out of training.
+pub const MIN_HOLDOUT: u64 = 1;
+
 /// The held-out count within `1..=files − 2` (two meshes must remain to train on).
 fn check_holdout(holdout: Option<u64>, files: usize) -> Result<Option<usize>> {
     let Some(k) = holdout else {
         return Ok(None);
     };
     let most = files.saturating_sub(2);
-    if k == 0 || k as usize > most {
+    if k < MIN_HOLDOUT || k as usize > most {
         let msg = format!(
-            "must hold out 1 to {most} of the {files} meshes (at least 2 must remain to \
-             train on), got {k}"
+            "must hold out {MIN_HOLDOUT} to {most} of the {files} meshes (at least 2 must \
+             remain to train on), got {k}"
         );
         return Err(ApiError::invalid("holdout", "range", msg));
     }

@@ -30,7 +30,14 @@ use super::AppState;
         (name = "jobs", description = "Background work"),
         (name = "reports", description = "Plots (SVG) and self-contained HTML reports of models and cohorts"),
         (name = "operations", description = "Health, metrics and documentation"),
-    )
+    ),
+    // Enumerations that query parameters name by `value_type`; the routers collect only
+    // the schemas of bodies.
+    components(schemas(
+        super::shapes::DownloadFormat,
+        super::simulation_meshes::OpeningsParam,
+        super::simulation_meshes::KindParam,
+    ))
 )]
 struct ApiDoc;
 
@@ -47,6 +54,7 @@ pub fn document() -> &'static utoipa::openapi::OpenApi {
     DOC.get_or_init(|| {
         let mut doc = super::api_router().split_for_parts().1;
         AccessDocs.modify(&mut doc);
+        super::contract::write_rules(&mut doc);
         doc
     })
 }

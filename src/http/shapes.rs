@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
-use super::cohorts::{load as load_cohort, page};
+use super::cohorts::{load as load_cohort, next_offset, page};
 use super::error::{ApiError, Problem, Result};
 use super::extractors::{ApiQuery, parse_id};
 use super::mesh_cache::MeshKey;
@@ -206,7 +206,7 @@ async fn list_cohort_shapes(
     let cohort = load_cohort(&state, parse_id("cohort", &id)?, &id).await?;
     let (limit, offset) = page(q.limit, q.offset)?;
     let rows = db::shapes::list_for_cohort(&state.pool, cohort.cohort_id, limit, offset).await?;
-    let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
+    let next_offset = next_offset(rows.len(), limit, offset);
     let items = rows.into_iter().map(ShapeView::from_row).collect();
     Ok(Json(ShapePage { items, next_offset }))
 }
@@ -231,6 +231,9 @@ async fn get_shape(
         ..ShapeView::from_row(row)
     }))
 }
+
+/// The units a mesh is served in, the default first: millimetres, or the shape's unit ball.
+pub const UNITS: [&str; 2] = ["mm", "unit"];
 
 /// Download options.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
@@ -286,11 +289,12 @@ async fn get_shape_mesh(
     headers: HeaderMap,
 ) -> Result<Response> {
     let request = MeshRequest::parse(q.format.as_deref(), &sim.params()).map_err(param_error)?;
-    let units = match q.units.as_deref() {
-        None | Some("mm") => "mm",
-        Some("unit") => "unit",
-        Some(u) => {
-            let message = format!("unknown units {u:?}; use mm or unit");
+    let given = q.units.as_deref().unwrap_or(UNITS[0]);
+    let units = match UNITS.iter().find(|known| **known == given) {
+        Some(known) => *known,
+        None => {
+            let u = given;
+            let message = format!("unknown units {u:?}; use {}", UNITS.join(" or "));
             return Err(ApiError::BadRequest {
                 field: Some("units".into()),
                 message,

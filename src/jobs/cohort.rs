@@ -166,7 +166,8 @@ impl Generation<'_> {
     }
 
     /// The pipeline of this cohort: anchors, training measurements and latents read, the
-    /// novelty reference built (cached by the engine per model and resolution).
+    /// novelty reference built from the training surfaces stored for the model and
+    /// resolution (the missing ones computed and stored first).
     async fn generator(&self) -> Result<CohortGenerator, JobError> {
         let ctx = self.ctx;
         let info = self
@@ -192,6 +193,14 @@ impl Generation<'_> {
                 .context("targets")?,
             ),
         };
+        let source = setup::ReferenceSource {
+            job_id: self.job_id,
+            model_id: &self.model.model_id,
+            model_dir: &model_dir,
+            count,
+            resolution: self.request.resolution,
+        };
+        let reference = setup::novelty_reference(ctx, &source, self.flag).await?;
         let engine = ctx.engine.clone();
         let (request, flag) = (self.request.clone(), self.flag.clone());
         let handle = EngineHandle {
@@ -203,12 +212,6 @@ impl Generation<'_> {
         let built = spawn_background(move || -> Result<CohortGenerator, JobError> {
             let latents = ModelLatents::read(&*engine, &model_dir, &request, count)?;
             let plan = CohortPlan::new(&request, count, latents.as_ref(), anchors)?;
-            let reference = engine
-                .novelty_reference(&model_dir, request.resolution, &flag)
-                .map_err(|e| match flag.load(Ordering::SeqCst) {
-                    true => CohortError::Cancelled,
-                    false => CohortError::Reference(e),
-                })?;
             let setup = CohortSetup {
                 reference,
                 training,

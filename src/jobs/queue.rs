@@ -88,6 +88,25 @@ impl Submission {
         Ok(id)
     }
 
+    /// Puts a failed or cancelled job back in the queue, unless the queue is full; returns
+    /// whether the job was in such a state (otherwise nothing changes). A refused requeue
+    /// leaves the transaction to be dropped, which undoes it.
+    pub async fn requeue(&mut self, job_id: i64) -> Result<bool, SubmitError> {
+        if !db::jobs::requeue_finished(&mut self.tx, job_id).await? {
+            return Ok(false);
+        }
+        // The job counts itself now.
+        let pending = db::jobs::count_pending(&mut *self.tx).await? - 1;
+        if pending >= self.queue.max_pending {
+            let retry_after = self.queue.retry_after_secs;
+            return Err(SubmitError::QueueFull {
+                pending,
+                retry_after,
+            });
+        }
+        Ok(true)
+    }
+
     /// Commits the transaction and wakes an idle worker.
     pub async fn commit(self) -> sqlx::Result<()> {
         self.tx.commit().await?;

@@ -1,18 +1,103 @@
 //! What cohorts of a model need before their first shape and the service keeps with the
 //! model: the training shapes' measurements, computed once per model (by the first targeted
-//! request or job that needs them) and stored in its row.
+//! request or job that needs them) and stored in its row; and the novelty reference's
+//! training surfaces, computed once per model and resolution and stored one by one, so a
+//! restart continues the setup where it stopped instead of starting it again.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
+use anyhow::Context;
 use sqlx::SqlitePool;
 
-use super::join_error;
 use super::priority::spawn_background;
+use super::{JobContext, JobError, join_error};
 use crate::cohort::targets::feasibility::{TrainingAnatomy, measure_training_shapes};
 use crate::db;
 use crate::engine::Engine;
+use crate::formats::mesh_blob;
+use crate::sdf::inference::novelty::NoveltyReference;
+
+/// One computation of novelty surfaces at a time: two jobs on one model and resolution
+/// share the surfaces the first one stores instead of computing them twice.
+static BUILDING_SURFACES: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// Where a cohort job's novelty reference comes from.
+pub struct ReferenceSource<'a> {
+    /// The job computing it (its setup steps count the surfaces it stores).
+    pub job_id: i64,
+    /// The model's id and directory.
+    pub model_id: &'a str,
+    /// The model's directory.
+    pub model_dir: &'a Path,
+    /// The model's training shapes.
+    pub count: usize,
+    /// The cohort's resolution.
+    pub resolution: usize,
+}
+
+/// The novelty reference of a model at a resolution: the training surfaces stored in the
+/// database, the missing ones reconstructed off the executor and each stored as soon as it
+/// is made, then sampled and indexed by the engine.
+pub async fn novelty_reference(
+    ctx: &JobContext,
+    source: &ReferenceSource<'_>,
+    cancel: &Arc<AtomicBool>,
+) -> Result<Arc<NoveltyReference>, JobError> {
+    let _one_at_a_time = BUILDING_SURFACES.lock().await;
+    let ReferenceSource {
+        job_id,
+        model_id,
+        model_dir,
+        count,
+        resolution,
+    } = *source;
+    let mut blobs: BTreeMap<usize, Vec<u8>> =
+        db::novelty_surfaces::stored(&ctx.pool, model_id, resolution)
+            .await?
+            .into_iter()
+            .filter_map(|(i, blob)| Some((usize::try_from(i).ok()?, blob)))
+            .filter(|(i, _)| *i < count)
+            .collect();
+    for index in 0..count {
+        if blobs.contains_key(&index) {
+            continue;
+        }
+        let (engine, dir, flag) = (ctx.engine.clone(), model_dir.to_path_buf(), cancel.clone());
+        let made = spawn_background(move || {
+            let mesh = engine.training_surface(&dir, index, resolution, &flag)?;
+            anyhow::Ok(mesh_blob::encode(&mesh))
+        })
+        .await
+        .map_err(join_error)?;
+        let blob = match made {
+            Ok(blob) => blob,
+            Err(_) if cancel.load(Ordering::SeqCst) => return Err(JobError::Stopped),
+            Err(e) => {
+                let e = e.context(format!("training shape {index} at resolution {resolution}"));
+                return Err(JobError::Failed(e.context("novelty reference")));
+            }
+        };
+        db::novelty_surfaces::store(&ctx.pool, job_id, model_id, resolution, index, &blob).await?;
+        tracing::debug!(model_id, resolution, index, "novelty surface stored");
+        blobs.insert(index, blob);
+    }
+    let engine = ctx.engine.clone();
+    let reference = spawn_background(move || -> anyhow::Result<NoveltyReference> {
+        let surfaces = blobs
+            .values()
+            .map(|blob| mesh_blob::decode(blob))
+            .collect::<Result<Vec<_>, _>>()
+            .context("a stored novelty surface")?;
+        engine.novelty_reference_from(&surfaces)
+    })
+    .await
+    .map_err(join_error)?
+    .context("novelty reference")?;
+    Ok(Arc::new(reference))
+}
 
 /// One measurement of training shapes at a time: a request and the job it queued (or two
 /// first uses) wait for the same result instead of computing it twice.

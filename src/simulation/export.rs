@@ -58,6 +58,9 @@ pub enum Variant {
 }
 
 impl Variant {
+    /// Both variants, the default first.
+    pub const ALL: [Variant; 2] = [Self::Capped, Self::Open];
+
     /// `capped` or `open`, as in parameters and file names.
     pub fn name(self) -> &'static str {
         match self {

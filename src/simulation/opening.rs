@@ -81,6 +81,16 @@ impl Default for OpeningOptions {
     }
 }
 
+/// Accepted values of the options that place openings, mm: (option, smallest, largest).
+/// The service's query parameters carry the same names and ranges.
+pub const OPTION_RANGES_MM: [(&str, f64, f64); 5] = [
+    ("inlet_below_annulus_mm", 0.0, 50.0),
+    ("outlet_above_stj_mm", 0.0, 200.0),
+    ("end_trim_mm", 0.5, 200.0),
+    ("branch_trim_mm", 0.5, 100.0),
+    ("ring_spacing_mm", 0.1, 10.0),
+];
+
 impl OpeningOptions {
     /// Every distance finite and within a range that keeps it inside a human aorta.
     pub fn validate(&self) -> Result<(), SimulationError> {
@@ -94,15 +104,18 @@ impl OpeningOptions {
                 ))
             }
         };
-        check(
-            "inlet_below_annulus_mm",
-            self.inlet_below_annulus_mm,
-            0.0,
-            50.0,
-        )?;
-        check("outlet_above_stj_mm", self.outlet_above_stj_mm, 0.0, 200.0)?;
-        check("end_trim_mm", self.end_trim_mm, 0.5, 200.0)?;
-        check("branch_trim_mm", self.branch_trim_mm, 0.5, 100.0)?;
-        check("ring_spacing_mm", self.ring_spacing_mm, 0.1, 10.0)
+        let bounded = |field: &'static str, value: f64| {
+            let (lo, hi) = OPTION_RANGES_MM
+                .iter()
+                .find(|(name, ..)| *name == field)
+                .map(|&(_, lo, hi)| (lo, hi))
+                .expect("every opening option has a range");
+            check(field, value, lo, hi)
+        };
+        bounded("inlet_below_annulus_mm", self.inlet_below_annulus_mm)?;
+        bounded("outlet_above_stj_mm", self.outlet_above_stj_mm)?;
+        bounded("end_trim_mm", self.end_trim_mm)?;
+        bounded("branch_trim_mm", self.branch_trim_mm)?;
+        bounded("ring_spacing_mm", self.ring_spacing_mm)
     }
 }

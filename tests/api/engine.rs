@@ -61,6 +61,8 @@ pub struct AnalyticEngine {
     pub release: AtomicBool,
     /// The call with this number panics.
     pub panic_on_call: Option<usize>,
+    /// `training_surface` calls so far (the novelty reference's setup work).
+    pub surfaces_built: AtomicUsize,
 }
 
 impl Engine for AnalyticEngine {
@@ -156,6 +158,27 @@ impl Engine for AnalyticEngine {
             })
             .collect();
         Ok(Arc::new(NoveltyReference::new(&surfaces, NOVELTY_POINTS)?))
+    }
+
+    fn training_surface(
+        &self,
+        _: &Path,
+        index: usize,
+        _: usize,
+        cancel: &AtomicBool,
+    ) -> anyhow::Result<TriMesh> {
+        anyhow::ensure!(!cancel.load(Ordering::SeqCst), "setup cancelled");
+        anyhow::ensure!(index < TRAINING_SHAPES, "no training shape {index}");
+        self.surfaces_built.fetch_add(1, Ordering::SeqCst);
+        let axes = training_axes(index);
+        Ok(ellipsoid_unit(
+            axes,
+            axes.iter().cloned().fold(0.0, f64::max),
+        ))
+    }
+
+    fn novelty_reference_from(&self, surfaces: &[TriMesh]) -> anyhow::Result<NoveltyReference> {
+        Ok(NoveltyReference::new(surfaces, NOVELTY_POINTS)?)
     }
 
     fn pairwise_chamfer(&self, meshes: &[TriMesh], _: u64) -> anyhow::Result<Vec<Vec<f64>>> {

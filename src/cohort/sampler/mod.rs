@@ -32,6 +32,8 @@ use crate::latent_models::pca::ModeSelection;
 pub const MAX_COMPONENTS: i64 = 16;
 /// Components the BIC chooses among when the request names neither count.
 pub const DEFAULT_MAX_COMPONENTS: usize = 4;
+/// Fewest leading modes a mixture may model.
+pub const MIN_MIXTURE_MODES: i64 = 1;
 /// Leading principal modes the mixture models by default.
 pub const DEFAULT_MIXTURE_MODES: usize = 4;
 
@@ -243,9 +245,9 @@ fn mixture_config(
     };
     let mixture_modes = match f.mixture_modes {
         None => DEFAULT_MIXTURE_MODES,
-        Some(m) if m >= 1 => usize::try_from(m).unwrap_or(usize::MAX),
+        Some(m) if m >= MIN_MIXTURE_MODES => usize::try_from(m).unwrap_or(usize::MAX),
         Some(m) => {
-            let msg = format!("must be at least 1, got {m}");
+            let msg = format!("must be at least {MIN_MIXTURE_MODES}, got {m}");
             return Err(RequestError::new("sampler.mixture_modes", "range", msg));
         }
     };

@@ -19,6 +19,9 @@ use crate::http::extractors::{ApiQuery, parse_id};
 use crate::http::rendering::render_off_executor;
 use crate::jobs::stats::{PairwiseSummary, ValueSummary, summarize_values};
 
+/// The metrics endpoint's formats, the default first.
+pub const METRICS_FORMATS: [&str; 2] = ["json", "csv"];
+
 /// Options of the metrics endpoint.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
 #[into_params(parameter_in = Query)]
@@ -129,17 +132,18 @@ pub(super) async fn get_cohort_metrics(
     Path(id): Path<String>,
     ApiQuery(q): ApiQuery<MetricsQuery>,
 ) -> Result<Response> {
-    let csv = match q.format.as_deref() {
-        None | Some("json") => false,
-        Some("csv") => true,
-        Some(other) => {
-            let message = format!("format must be json or csv, got {other:?}");
-            return Err(ApiError::BadRequest {
-                field: Some("format".into()),
-                message,
-            });
-        }
-    };
+    let format = q.format.as_deref().unwrap_or(METRICS_FORMATS[0]);
+    if !METRICS_FORMATS.contains(&format) {
+        let message = format!(
+            "format must be {}, got {format:?}",
+            METRICS_FORMATS.join(" or ")
+        );
+        return Err(ApiError::BadRequest {
+            field: Some("format".into()),
+            message,
+        });
+    }
+    let csv = format == "csv";
     let cohort = super::load(&state, parse_id("cohort", &id)?, &id).await?;
     let Some(row) = db::cohort_metrics::get(&state.pool, cohort.cohort_id).await? else {
         return Err(ApiError::Conflict(format!(

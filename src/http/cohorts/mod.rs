@@ -32,6 +32,7 @@ pub(super) fn router() -> OpenApiRouter<AppState> {
         .routes(routes!(create_cohort, list_cohorts))
         .routes(routes!(get_cohort, delete_cohort))
         .routes(routes!(cancel_cohort))
+        .routes(routes!(retry_cohort))
         .routes(routes!(metrics::get_cohort_metrics))
 }
 
@@ -207,18 +208,30 @@ async fn list_cohorts(
     };
     let (limit, offset) = page(f.limit, f.offset)?;
     let rows = db::cohorts::list(&state.pool, f.model_id.as_deref(), status, limit, offset).await?;
-    let next_offset = (rows.len() as i64 == limit).then_some(offset + limit);
+    let next_offset = next_offset(rows.len(), limit, offset);
     Ok(Json(CohortPage {
         items: rows.into_iter().map(CohortView::from_row).collect(),
         next_offset,
     }))
 }
 
+/// Page sizes a listing accepts.
+pub const PAGE_LIMIT: std::ops::RangeInclusive<i64> = 1..=100;
+/// Page size when `limit` is absent.
+pub const DEFAULT_PAGE_LIMIT: i64 = 20;
+
+/// The offset of the page after a full one; none after a short page or past the largest
+/// offset.
+pub fn next_offset(rows: usize, limit: i64, offset: i64) -> Option<i64> {
+    (rows as i64 == limit).then(|| offset.checked_add(limit))?
+}
+
 /// Validates paging parameters (shared with the shapes listing).
 pub fn page(limit: Option<i64>, offset: Option<i64>) -> Result<(i64, i64)> {
-    let limit = limit.unwrap_or(20);
-    if !(1..=100).contains(&limit) {
-        let message = format!("limit must be between 1 and 100, got {limit}");
+    let limit = limit.unwrap_or(DEFAULT_PAGE_LIMIT);
+    if !PAGE_LIMIT.contains(&limit) {
+        let (lo, hi) = (PAGE_LIMIT.start(), PAGE_LIMIT.end());
+        let message = format!("limit must be between {lo} and {hi}, got {limit}");
         return Err(ApiError::BadRequest {
             field: Some("limit".into()),
             message,
@@ -274,6 +287,37 @@ async fn cancel_cohort(
     }
     let cohort = load(&state, cohort.cohort_id, &id).await?;
     Ok((StatusCode::ACCEPTED, Json(CohortView::from_row(cohort))))
+}
+
+/// Resumes a failed or cancelled cohort: its stored shapes stay and the missing ones are
+/// generated from the same seeds, so the result equals an uninterrupted run.
+#[utoipa::path(post, path = "/v1/cohorts/{id}/retry", tag = "cohorts",
+    params(("id" = i64, Path, description = "Cohort id")),
+    responses((status = 202, body = CohortView, description = "Queued again; `Location` names the cohort"),
+              (status = 404, body = Problem, content_type = "application/problem+json"),
+              (status = 409, body = Problem, content_type = "application/problem+json", description = "Queued, running or succeeded: only a failed or cancelled cohort can be retried"),
+              (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After")))]
+async fn retry_cohort(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response> {
+    let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
+    let mut submission = state.queue.begin().await?;
+    if !submission.requeue(cohort.job_id).await? {
+        drop(submission);
+        // Read again: the state may have changed since the cohort was loaded.
+        let status = db::jobs::get(&state.pool, cohort.job_id)
+            .await?
+            .map_or(cohort.status, |job| job.status);
+        let msg =
+            format!("cohort {id} is {status}; only a failed or cancelled cohort can be retried");
+        return Err(ApiError::Conflict(msg));
+    }
+    submission.commit().await?;
+    tracing::info!(
+        cohort_id = cohort.cohort_id,
+        job_id = cohort.job_id,
+        "cohort queued again"
+    );
+    let cohort = load(&state, cohort.cohort_id, &id).await?;
+    Ok(accepted(cohort, false))
 }
 
 /// Deletes a cohort with its shapes and metrics; a running cohort must be cancelled first.

@@ -128,19 +128,30 @@ pub fn training_surfaces(
     latents
         .iter()
         .enumerate()
-        .map(|(index, z)| {
-            if cancel.load(Ordering::Relaxed) {
-                return Err(NoveltyError::Cancelled);
-            }
-            let field = model.field(z).map_err(|e| NoveltyError::Reconstruct {
-                index,
-                source: ReconstructError::from(e),
-            })?;
-            reconstruct(&field, resolution, extraction)
-                .map(|e| e.mesh)
-                .map_err(|source| NoveltyError::Reconstruct { index, source })
-        })
+        .map(|(index, z)| training_surface(model, z, index, resolution, extraction, cancel))
         .collect()
+}
+
+/// The model's reconstruction of training latent `index` (`latent`) at `resolution`
+/// (unit-ball coordinates): one surface of the novelty reference.
+pub fn training_surface(
+    model: &LoadedModel,
+    latent: &[f32],
+    index: usize,
+    resolution: usize,
+    extraction: ExtractionMethod,
+    cancel: &AtomicBool,
+) -> Result<TriMesh, NoveltyError> {
+    if cancel.load(Ordering::Relaxed) {
+        return Err(NoveltyError::Cancelled);
+    }
+    let field = model.field(latent).map_err(|e| NoveltyError::Reconstruct {
+        index,
+        source: ReconstructError::from(e),
+    })?;
+    reconstruct(&field, resolution, extraction)
+        .map(|e| e.mesh)
+        .map_err(|source| NoveltyError::Reconstruct { index, source })
 }
 
 #[cfg(test)]
