@@ -31,14 +31,13 @@ impl FromStr for ApiKey {
     }
 }
 
-/// Settings of `aortagen serve`.
+/// Where the service keeps its state: shared by `serve`, `worker` and `migrate`, so every
+/// process of a deployment is configured the same way.
 #[derive(Debug, Clone, clap::Args)]
-pub struct Config {
-    /// Address to listen on (port 0 picks a free port).
-    #[arg(long, env = "AORTAGEN_BIND", default_value = "127.0.0.1:8080")]
-    pub bind: String,
-
-    /// SQLite database URL; the file and its directory are created when missing.
+pub struct StorageConfig {
+    /// Database URL: `sqlite://FILE` (the embedded default; the file and its directory are
+    /// created when missing) or `postgres://USER:PASSWORD@HOST/DB` (several processes and
+    /// machines share it).
     #[arg(
         long = "database",
         env = "AORTAGEN_DATABASE_URL",
@@ -46,9 +45,70 @@ pub struct Config {
     )]
     pub database_url: String,
 
-    /// Worker tasks running jobs concurrently [default: number of CPU cores].
+    /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to it.
+    #[arg(long, env = "AORTAGEN_MODELS_DIR", default_value = "models")]
+    pub models_dir: PathBuf,
+}
+
+/// How a process runs tasks: shared by `serve` and `worker`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct WorkerConfig {
+    /// Worker tasks running jobs concurrently [default: number of CPU cores]; 0 with `serve`
+    /// runs the API alone (workers elsewhere take the work).
     #[arg(long, env = "AORTAGEN_WORKERS")]
     pub workers: Option<usize>,
+
+    /// Seconds a worker holds a task without renewing its lease; a worker silent for longer
+    /// (dead, paused, cut off) loses the task to another. Renewed every tenth of it.
+    #[arg(long, env = "AORTAGEN_LEASE_SECS", default_value_t = 30,
+          value_parser = clap::value_parser!(u64).range(1..=3600))]
+    pub lease_secs: u64,
+
+    /// Leases of one task that may expire in a row (its workers died or hung) before the
+    /// task and its job are failed.
+    #[arg(long, env = "AORTAGEN_MAX_ATTEMPTS", default_value_t = 5,
+          value_parser = clap::value_parser!(i64).range(1..))]
+    pub max_attempts: i64,
+
+    /// Nice value (0–19) of the threads that train and generate: above 0 the API answers
+    /// first when it competes with them for a core.
+    #[arg(long, env = "AORTAGEN_WORKER_NICE", default_value_t = 10,
+          value_parser = clap::value_parser!(i32).range(0..=19))]
+    pub worker_nice: i32,
+}
+
+impl WorkerConfig {
+    /// The worker count actually used (0: none).
+    pub fn worker_count(&self) -> usize {
+        self.workers
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+    }
+
+    /// Lease length, renewal interval and stall bound.
+    pub fn leases(&self) -> crate::jobs::LeaseSettings {
+        let lease = std::time::Duration::from_secs(self.lease_secs);
+        crate::jobs::LeaseSettings {
+            lease,
+            heartbeat: (lease / 10).max(std::time::Duration::from_millis(100)),
+            max_stalls: self.max_attempts,
+        }
+    }
+}
+
+/// Settings of `aortagen serve`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct Config {
+    /// Address to listen on (port 0 picks a free port).
+    #[arg(long, env = "AORTAGEN_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: String,
+
+    /// Database and models.
+    #[command(flatten)]
+    pub storage: StorageConfig,
+
+    /// Workers in this process.
+    #[command(flatten)]
+    pub work: WorkerConfig,
 
     /// Jobs allowed to wait or run at once; further submissions get 429.
     #[arg(long, env = "AORTAGEN_MAX_QUEUE", default_value_t = 64)]
@@ -108,10 +168,6 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_MESH_CACHE_BYTES", default_value_t = 64 * 1024 * 1024)]
     pub mesh_cache_bytes: usize,
 
-    /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to it.
-    #[arg(long, env = "AORTAGEN_MODELS_DIR", default_value = "models")]
-    pub models_dir: PathBuf,
-
     /// Seconds a request may take before it is answered 408.
     #[arg(long, env = "AORTAGEN_REQUEST_TIMEOUT_SECS", default_value_t = 30)]
     pub request_timeout_secs: u64,
@@ -136,17 +192,6 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_RETRY_AFTER_SECS", default_value_t = 30)]
     pub retry_after_secs: u64,
 
-    /// Times in a row a job may be interrupted by a dying process without committing any
-    /// progress before it is failed.
-    #[arg(long, env = "AORTAGEN_MAX_ATTEMPTS", default_value_t = 5)]
-    pub max_attempts: i64,
-
-    /// Nice value (0–19) of the threads that train and generate: above 0 the API answers
-    /// first when it competes with them for a core.
-    #[arg(long, env = "AORTAGEN_WORKER_NICE", default_value_t = 10,
-          value_parser = clap::value_parser!(i32).range(0..=19))]
-    pub worker_nice: i32,
-
     /// Log as JSON lines instead of human-readable text.
     #[arg(long, env = "AORTAGEN_LOG_JSON", default_value_t = false)]
     pub log_json: bool,
@@ -162,16 +207,9 @@ impl Config {
     /// Defaults with a different database and bind address (tests, embedding).
     pub fn with_database(database_url: impl Into<String>, bind: impl Into<String>) -> Self {
         let mut config = <Wrapper as clap::Parser>::parse_from(["aortagen"]).config;
-        config.database_url = database_url.into();
+        config.storage.database_url = database_url.into();
         config.bind = bind.into();
         config
-    }
-
-    /// The worker count actually used.
-    pub fn worker_count(&self) -> usize {
-        self.workers
-            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
-            .max(1)
     }
 }
 

@@ -18,6 +18,7 @@ pub mod http;
 pub mod jobs;
 /// Density models of training latents (PCA Gaussian, PCA mixture) that draw new latents.
 pub mod latent_models;
+pub mod objects;
 pub mod render;
 pub mod report;
 pub mod sdf;

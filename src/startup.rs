@@ -1,5 +1,6 @@
-//! The service lifecycle: open and migrate the database, recover interrupted jobs, register
-//! the bundled model, bind, then serve and run workers until a shutdown signal.
+//! The service lifecycle: open and migrate the database, free the leases of this host's
+//! dead processes, register the bundled model, bind, then serve and run workers until a
+//! shutdown signal. [`run_workers`] is the same without the API (`aortagen worker`).
 
 use std::future::Future;
 use std::path::Path;
@@ -7,11 +8,10 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::Context;
-use sqlx::SqlitePool;
 use tokio::net::TcpListener;
 use tokio::sync::watch;
 
-use crate::config::Config;
+use crate::config::{Config, StorageConfig, WorkerConfig};
 use crate::db;
 use crate::db::states::ModelStatus;
 use crate::engine::Engine;
@@ -19,7 +19,8 @@ use crate::http::access::AccessPolicy;
 use crate::http::mesh_cache::MeshCache;
 use crate::http::{self, AppState};
 use crate::jobs::simulation::{self, SimulationWork};
-use crate::jobs::{JobContext, JobControls, JobQueue, worker};
+use crate::jobs::{self, JobContext, JobControls, JobQueue, worker};
+use crate::objects::Objects;
 use crate::telemetry::ServiceMetrics;
 
 /// Longest a shutdown waits for running jobs and open requests before abandoning them.
@@ -47,21 +48,17 @@ impl Application {
                 "API keys required for state-changing requests"
             );
         }
-        let workers = config.worker_count();
-        // Workers hold a connection only while committing; requests need a few more.
-        let connections = (2 * workers + 8) as u32;
+        let workers = config.work.worker_count();
+        // Workers hold a connection while committing and renewing leases; requests need a
+        // few more.
+        let connections = (3 * workers + 8) as u32;
         let read_only_switch = db::ReadOnlySwitch::default();
         let pool =
-            db::connect_with_switch(&config.database_url, connections, &read_only_switch).await?;
-        let (requeued, failed) = db::jobs::requeue_interrupted(&pool, config.max_attempts).await?;
-        if requeued + failed > 0 {
-            tracing::warn!(
-                requeued,
-                failed,
-                "recovered jobs interrupted by a previous stop"
-            );
-        }
-        let bundled = config.models_dir.join(DEFAULT_MODEL_ID);
+            db::connect_with_switch(&config.storage.database_url, connections, &read_only_switch)
+                .await?;
+        tracing::info!(database = db::Backend::of(&pool).name(), "database ready");
+        free_dead_leases(&pool).await?;
+        let bundled = config.storage.models_dir.join(DEFAULT_MODEL_ID);
         if bundled.is_dir() {
             if let Err(e) = register_model(&pool, engine.clone(), DEFAULT_MODEL_ID, &bundled).await
             {
@@ -77,13 +74,7 @@ impl Application {
             .await
             .with_context(|| format!("cannot listen on {}", config.bind))?;
         let port = listener.local_addr()?.port();
-        let jobs = JobContext {
-            pool: pool.clone(),
-            engine,
-            controls: JobControls::default(),
-            metrics: Arc::new(ServiceMetrics::default()),
-            models_dir: config.models_dir.clone(),
-        };
+        let jobs = job_context(pool.clone(), engine, &config.storage, &config.work);
         let mesh_cache = Arc::new(MeshCache::new(config.mesh_cache_bytes));
         let queue = JobQueue::new(pool.clone(), config.max_queue, config.retry_after_secs);
         let state = AppState {
@@ -92,6 +83,7 @@ impl Application {
             simulations: Arc::new(SimulationWork::new(
                 simulation::DEFAULT_SLOTS,
                 simulation::DEFAULT_BACKLOG,
+                jobs.objects.clone(),
             )),
             config: Arc::new(config),
             jobs,
@@ -167,16 +159,7 @@ impl Application {
         })
         .await;
         if workers_done.is_err() {
-            let abandoned = self.state.jobs.controls.running_jobs();
-            tracing::warn!(
-                jobs = ?abandoned,
-                "jobs did not stop within the shutdown grace period; re-queueing them"
-            );
-            for job_id in abandoned {
-                if let Err(e) = db::jobs::release(&self.state.pool, job_id).await {
-                    tracing::error!(job_id, error = %e, "cannot re-queue the job");
-                }
-            }
+            abandon_running_tasks(&self.state.jobs).await;
             handles.iter().for_each(|h| h.abort());
         }
         let served = match early {
@@ -202,10 +185,113 @@ impl Application {
     }
 }
 
+/// The context workers of this process run tasks with.
+pub fn job_context(
+    pool: db::Pool,
+    engine: Arc<dyn Engine>,
+    storage: &StorageConfig,
+    work: &WorkerConfig,
+) -> JobContext {
+    JobContext {
+        objects: Objects::Database(pool.clone()),
+        pool,
+        engine,
+        controls: JobControls::default(),
+        metrics: Arc::new(ServiceMetrics::default()),
+        models_dir: storage.models_dir.clone(),
+        leases: work.leases(),
+        owner: format!("{}/api", jobs::process_identity()),
+        housekeeping: Default::default(),
+    }
+}
+
+/// At start-up: leases still held by processes of this host that are gone (a crash, a
+/// kill) are expired, so their tasks run again at once instead of when the leases run out.
+/// Other processes' work, here or on other machines, is left alone.
+async fn free_dead_leases(pool: &db::Pool) -> anyhow::Result<()> {
+    let expired = jobs::expire_dead_local_leases(pool).await?;
+    if expired > 0 {
+        tracing::warn!(
+            tasks = expired,
+            "tasks held by a stopped process on this host run again"
+        );
+    }
+    Ok(())
+}
+
+/// Gives back the tasks this process still runs after the shutdown grace period, so other
+/// workers take them at once (their finished shapes are kept).
+async fn abandon_running_tasks(ctx: &JobContext) {
+    let jobs = ctx.controls.running_jobs();
+    tracing::warn!(
+        jobs = ?jobs,
+        "tasks did not stop within the shutdown grace period; giving them back"
+    );
+    let prefix = format!("{}/", jobs::process_identity());
+    if let Err(e) = db::tasks::release_owned(&ctx.pool, &prefix).await {
+        tracing::error!(error = %e, "cannot give the tasks back; their leases will expire");
+    }
+}
+
+/// Runs `workers` task workers without the API until `shutdown` resolves (`aortagen
+/// worker`): on shutdown running tasks are interrupted and given back, as by the service.
+pub async fn run_workers(
+    storage: StorageConfig,
+    work: WorkerConfig,
+    engine: Arc<dyn Engine>,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let workers = work.worker_count().max(1);
+    let pool = db::open(
+        &storage.database_url,
+        (3 * workers + 2) as u32,
+        &db::ReadOnlySwitch::default(),
+    )
+    .await?;
+    db::require_current_schema(&pool).await?;
+    free_dead_leases(&pool).await?;
+    let ctx = job_context(pool.clone(), engine, &storage, &work);
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let wake = Arc::new(tokio::sync::Notify::new());
+    let mut handles: Vec<_> = (0..workers)
+        .map(|i| {
+            tokio::spawn(worker::run_worker_until_stopped(
+                i,
+                ctx.clone(),
+                wake.clone(),
+                stop_rx.clone(),
+            ))
+        })
+        .collect();
+    tracing::info!(
+        workers,
+        database = db::Backend::of(&pool).name(),
+        "workers running"
+    );
+    shutdown.await;
+    tracing::info!("shutting down: interrupting running tasks");
+    ctx.controls.shut_down();
+    let _ = stop_tx.send(true);
+    let done = tokio::time::timeout(SHUTDOWN_GRACE, async {
+        for h in &mut handles {
+            if let Err(e) = h.await {
+                tracing::error!(error = %e, "worker ended abnormally");
+            }
+        }
+    })
+    .await;
+    if done.is_err() {
+        abandon_running_tasks(&ctx).await;
+        handles.iter().for_each(|h| h.abort());
+    }
+    pool.close().await;
+    Ok(())
+}
+
 /// Registers the model in `dir` under `id` unless that id exists; the engine reads its
 /// facts (off the executor). Returns whether it was newly registered.
 pub async fn register_model(
-    pool: &SqlitePool,
+    pool: &db::Pool,
     engine: Arc<dyn Engine>,
     id: &str,
     dir: &Path,

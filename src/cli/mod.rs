@@ -8,6 +8,7 @@ pub mod fit;
 pub mod generate;
 pub mod measure;
 pub mod mesh;
+pub mod migrate;
 pub mod progress;
 pub mod render;
 pub mod report;
@@ -16,6 +17,7 @@ pub mod simulate;
 pub mod synth;
 pub mod train;
 pub mod validate;
+pub mod worker;
 
 /// Generative models of aortic shapes and synthetic cohorts for in-silico trials.
 #[derive(Debug, Parser)]
@@ -43,8 +45,12 @@ pub enum Command {
     Generate(generate::GenerateArgs),
     /// Report a mesh file's counts, area, volume, closedness and extent; convert formats.
     Mesh(mesh::MeshArgs),
-    /// Run the cohort service: REST API and job workers on a SQLite database.
+    /// Run the cohort service: REST API and job workers on SQLite or PostgreSQL.
     Serve(serve::ServeArgs),
+    /// Run job workers only (no API), against the database the service uses.
+    Worker(worker::WorkerArgs),
+    /// Bring the database's schema to this version and exit.
+    Migrate(migrate::MigrateArgs),
     /// Measure a vessel surface: centreline length, diameter profile, root landmarks.
     Measure(measure::MeasureArgs),
     /// Write an HTML report with SVG plots of a model or a directory of meshes.
@@ -68,6 +74,8 @@ pub fn run() -> anyhow::Result<()> {
         Command::Generate(args) => generate::run(args),
         Command::Mesh(args) => mesh::run(args),
         Command::Serve(args) => serve::run(args),
+        Command::Worker(args) => worker::run(args),
+        Command::Migrate(args) => migrate::run(args),
         Command::Measure(args) => measure::run(args),
         Command::Report(args) => report::run(args),
         Command::Compare(args) => compare::run(args),

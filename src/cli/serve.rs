@@ -1,4 +1,5 @@
-//! `aortagen serve`: the cohort service (REST API + job workers) on a SQLite database.
+//! `aortagen serve`: the cohort service (REST API + job workers) on SQLite or PostgreSQL;
+//! with `--workers 0` the API alone, while `aortagen worker` processes take the work.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -19,8 +20,8 @@ pub struct ServeArgs {
 /// Runs the service until Ctrl-C or SIGTERM.
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
     crate::telemetry::init_subscriber("aortagen=info,tower_http=info", args.config.log_json);
-    let workers = args.config.worker_count();
-    crate::jobs::priority::init_background_pool(args.config.worker_nice);
+    let workers = args.config.work.worker_count();
+    crate::jobs::priority::init_background_pool(args.config.work.worker_nice);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .thread_name("aortagen")
@@ -36,6 +37,6 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
 }
 
 /// The science engine the service runs on: the trained SDF models.
-fn engine() -> Arc<dyn Engine> {
+pub(super) fn engine() -> Arc<dyn Engine> {
     Arc::new(crate::engine::SdfEngine::new(Backend::default()))
 }

@@ -2,7 +2,6 @@
 //! with its `fit` job and completed (latent, Chamfer, transform) when the job succeeds.
 
 use serde::Serialize;
-use sqlx::{SqliteConnection, SqlitePool};
 
 use super::states::AnchorStatus;
 
@@ -101,11 +100,11 @@ pub struct NewAnchor<'a> {
 }
 
 /// Inserts a `fitting` anchor inside the caller's transaction; returns its id.
-pub async fn insert(conn: &mut SqliteConnection, a: &NewAnchor<'_>) -> sqlx::Result<()> {
+pub async fn insert(conn: &mut super::Conn, a: &NewAnchor<'_>) -> sqlx::Result<()> {
     sqlx::query(
         "insert into anchor (anchor_id, model_id, job_id, name, source_name, source_path,
              iterations, seed)
-         values (?, ?, ?, ?, ?, ?, ?, ?)",
+         values ($1, $2, $3, $4, $5, $6, $7, $8)",
     )
     .bind(a.anchor_id)
     .bind(a.model_id)
@@ -122,13 +121,13 @@ pub async fn insert(conn: &mut SqliteConnection, a: &NewAnchor<'_>) -> sqlx::Res
 
 /// Allocates the next anchor's id (never one a deleted anchor had, see [`super::ids`])
 /// inside the caller's write transaction, known before the fit job that refers to it.
-pub async fn next_id(conn: &mut SqliteConnection) -> sqlx::Result<i64> {
+pub async fn next_id(conn: &mut super::Conn) -> sqlx::Result<i64> {
     super::ids::allocate(conn, super::ids::IdKind::Anchor).await
 }
 
 /// Records a successful fit.
-pub async fn set_fitted(
-    pool: &SqlitePool,
+pub async fn set_fitted<'e>(
+    pool: impl super::Executor<'e>,
     anchor_id: i64,
     latent: &[f32],
     chamfer: f64,
@@ -136,10 +135,10 @@ pub async fn set_fitted(
 ) -> sqlx::Result<()> {
     let blob: Vec<u8> = latent.iter().flat_map(|v| v.to_le_bytes()).collect();
     sqlx::query(
-        "update anchor set status = 'ready', latent = ?, chamfer = ?, centre_x = ?,
-             centre_y = ?, centre_z = ?, radius = ?, error = null,
+        "update anchor set status = 'ready', latent = $1, chamfer = $2, centre_x = $3,
+             centre_y = $4, centre_z = $5, radius = $6, error = null,
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where anchor_id = ?",
+         where anchor_id = $7",
     )
     .bind(blob)
     .bind(chamfer)
@@ -154,11 +153,15 @@ pub async fn set_fitted(
 }
 
 /// Records a fit that did not succeed.
-pub async fn set_failed(pool: &SqlitePool, anchor_id: i64, error: &str) -> sqlx::Result<()> {
+pub async fn set_failed<'e>(
+    pool: impl super::Executor<'e>,
+    anchor_id: i64,
+    error: &str,
+) -> sqlx::Result<()> {
     sqlx::query(
-        "update anchor set status = 'failed', error = ?,
+        "update anchor set status = 'failed', error = $1,
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where anchor_id = ?",
+         where anchor_id = $2",
     )
     .bind(error)
     .bind(anchor_id)
@@ -168,8 +171,8 @@ pub async fn set_failed(pool: &SqlitePool, anchor_id: i64, error: &str) -> sqlx:
 }
 
 /// One anchor by id.
-pub async fn get(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<Option<AnchorRow>> {
-    sqlx::query_as(select_anchor!("where anchor_id = ?"))
+pub async fn get(pool: &super::Pool, anchor_id: i64) -> sqlx::Result<Option<AnchorRow>> {
+    sqlx::query_as(select_anchor!("where anchor_id = $1"))
         .bind(anchor_id)
         .fetch_optional(pool)
         .await
@@ -177,11 +180,11 @@ pub async fn get(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<Option<Ancho
 
 /// One anchor by model and name.
 pub async fn get_by_name(
-    conn: &mut SqliteConnection,
+    conn: &mut super::Conn,
     model_id: &str,
     name: &str,
 ) -> sqlx::Result<Option<AnchorRow>> {
-    sqlx::query_as(select_anchor!("where model_id = ? and name = ?"))
+    sqlx::query_as(select_anchor!("where model_id = $1 and name = $2"))
         .bind(model_id)
         .bind(name)
         .fetch_optional(conn)
@@ -189,16 +192,16 @@ pub async fn get_by_name(
 }
 
 /// A model's anchors, oldest first.
-pub async fn list_for_model(pool: &SqlitePool, model_id: &str) -> sqlx::Result<Vec<AnchorRow>> {
-    sqlx::query_as(select_anchor!("where model_id = ? order by anchor_id"))
+pub async fn list_for_model(pool: &super::Pool, model_id: &str) -> sqlx::Result<Vec<AnchorRow>> {
+    sqlx::query_as(select_anchor!("where model_id = $1 order by anchor_id"))
         .bind(model_id)
         .fetch_all(pool)
         .await
 }
 
 /// Cohorts whose request names the anchor.
-pub async fn cohort_count(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<i64> {
-    sqlx::query_scalar("select count(distinct cohort_id) from cohort_anchor where anchor_id = ?")
+pub async fn cohort_count(pool: &super::Pool, anchor_id: i64) -> sqlx::Result<i64> {
+    sqlx::query_scalar("select count(distinct cohort_id) from cohort_anchor where anchor_id = $1")
         .bind(anchor_id)
         .fetch_one(pool)
         .await
@@ -206,29 +209,31 @@ pub async fn cohort_count(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<i64
 
 /// Records the anchors a cohort forces into every shape (inside its creating transaction).
 pub async fn set_cohort_anchors(
-    conn: &mut SqliteConnection,
+    conn: &mut super::Conn,
     cohort_id: i64,
     anchor_ids: &[i64],
 ) -> sqlx::Result<()> {
     for (position, &anchor_id) in anchor_ids.iter().enumerate() {
-        sqlx::query("insert into cohort_anchor (cohort_id, position, anchor_id) values (?, ?, ?)")
-            .bind(cohort_id)
-            .bind(position as i64)
-            .bind(anchor_id)
-            .execute(&mut *conn)
-            .await?;
+        sqlx::query(
+            "insert into cohort_anchor (cohort_id, position, anchor_id) values ($1, $2, $3)",
+        )
+        .bind(cohort_id)
+        .bind(position as i64)
+        .bind(anchor_id)
+        .execute(&mut *conn)
+        .await?;
     }
     Ok(())
 }
 
 /// Records the anchors a stored shape mixed (inside the shape's transaction).
 pub async fn set_shape_anchors(
-    conn: &mut SqliteConnection,
+    conn: &mut super::Conn,
     shape_id: i64,
     anchor_ids: &[i64],
 ) -> sqlx::Result<()> {
     for (position, &anchor_id) in anchor_ids.iter().enumerate() {
-        sqlx::query("insert into shape_anchor (shape_id, position, anchor_id) values (?, ?, ?)")
+        sqlx::query("insert into shape_anchor (shape_id, position, anchor_id) values ($1, $2, $3)")
             .bind(shape_id)
             .bind(position as i64)
             .bind(anchor_id)
@@ -239,8 +244,8 @@ pub async fn set_shape_anchors(
 }
 
 /// Removes an anchor; false when it did not exist.
-pub async fn delete(pool: &SqlitePool, anchor_id: i64) -> sqlx::Result<bool> {
-    let done = sqlx::query("delete from anchor where anchor_id = ?")
+pub async fn delete(pool: &super::Pool, anchor_id: i64) -> sqlx::Result<bool> {
+    let done = sqlx::query("delete from anchor where anchor_id = $1")
         .bind(anchor_id)
         .execute(pool)
         .await?;

@@ -2,8 +2,7 @@
 
 use std::collections::BTreeMap;
 
-use sqlx::types::Json;
-use sqlx::{SqliteConnection, SqlitePool};
+use super::Json;
 
 use super::states::JobStatus;
 use crate::cohort::targets::TargetRange;
@@ -109,37 +108,38 @@ impl CohortRow {
 
 const SELECT: &str = "select c.cohort_id, c.model_id, c.job_id, c.count, c.arity, c.weighting,
         c.weights, c.seed, c.resolution, c.latent_noise, c.selection, c.min_novelty,
-        (select coalesce(sum(s.redraws), 0) from shape s where s.cohort_id = c.cohort_id)
+        (select cast(coalesce(sum(s.redraws), 0) as bigint) from shape s
+            where s.cohort_id = c.cohort_id)
             as redraws_total,
         c.targets, c.max_candidates,
-        (select coalesce(sum(s.candidates), 0) from shape s where s.cohort_id = c.cohort_id)
+        (select cast(coalesce(sum(s.candidates), 0) as bigint) from shape s
+            where s.cohort_id = c.cohort_id)
             as candidates_total,
         (select count(*) from shape s where s.cohort_id = c.cohort_id and s.targets_met = 0)
             as targets_not_met,
         c.request_hash, j.status,
         (select count(*) from shape s where s.cohort_id = c.cohort_id) as shapes_done,
         j.error, c.created_at, j.started_at, j.finished_at,
-        (select json_group_array(anchor_id) from (select anchor_id from cohort_anchor a
-            where a.cohort_id = c.cohort_id order by a.position) having count(*) > 0)
-            as anchors,
+        (select json_group_array(a.anchor_id order by a.position) from cohort_anchor a
+            where a.cohort_id = c.cohort_id having count(*) > 0) as anchors,
         c.sampler
     from cohort c join job j on j.job_id = c.job_id";
 
 /// Allocates the next cohort's id (never one a deleted cohort had, see [`super::ids`])
 /// inside the caller's write transaction, known before the job that refers to it.
-pub async fn next_id(conn: &mut SqliteConnection) -> sqlx::Result<i64> {
+pub async fn next_id(conn: &mut super::Conn) -> sqlx::Result<i64> {
     super::ids::allocate(conn, super::ids::IdKind::Cohort).await
 }
 
 /// Inserts a cohort inside the caller's transaction.
-pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Result<()> {
+pub async fn insert(conn: &mut super::Conn, c: &NewCohort<'_>) -> sqlx::Result<()> {
     let r = c.request;
     let targets = r.targets.as_ref().map(|t| Json(t.targets.to_map()));
     sqlx::query(
         "insert into cohort (cohort_id, model_id, job_id, count, arity, weighting, weights,
              seed, resolution, latent_noise, selection, min_novelty, idempotency_key,
              request_hash, targets, max_candidates, sampler)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+         values ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, $17)",
     )
     .bind(c.cohort_id)
     .bind(c.model_id)
@@ -167,8 +167,8 @@ pub async fn insert(conn: &mut SqliteConnection, c: &NewCohort<'_>) -> sqlx::Res
 }
 
 /// One cohort by id.
-pub async fn get(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Option<CohortRow>> {
-    let sql = sqlx::AssertSqlSafe(format!("{SELECT} where c.cohort_id = ?"));
+pub async fn get(pool: &super::Pool, cohort_id: i64) -> sqlx::Result<Option<CohortRow>> {
+    let sql = sqlx::AssertSqlSafe(format!("{SELECT} where c.cohort_id = $1"));
     sqlx::query_as(sql)
         .bind(cohort_id)
         .fetch_optional(pool)
@@ -177,24 +177,24 @@ pub async fn get(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Option<Cohor
 
 /// The cohort created under an idempotency key, if any.
 pub async fn find_by_idempotency_key(
-    conn: &mut SqliteConnection,
+    conn: &mut super::Conn,
     key: &str,
 ) -> sqlx::Result<Option<CohortRow>> {
-    let sql = sqlx::AssertSqlSafe(format!("{SELECT} where c.idempotency_key = ?"));
+    let sql = sqlx::AssertSqlSafe(format!("{SELECT} where c.idempotency_key = $1"));
     sqlx::query_as(sql).bind(key).fetch_optional(conn).await
 }
 
 /// A page of cohorts, newest first, optionally filtered by model and status.
 pub async fn list(
-    pool: &SqlitePool,
+    pool: &super::Pool,
     model_id: Option<&str>,
     status: Option<JobStatus>,
     limit: i64,
     offset: i64,
 ) -> sqlx::Result<Vec<CohortRow>> {
     let sql = sqlx::AssertSqlSafe(format!(
-        "{SELECT} where (?1 is null or c.model_id = ?1) and (?2 is null or j.status = ?2)
-         order by c.cohort_id desc limit ?3 offset ?4"
+        "{SELECT} where ($1 is null or c.model_id = $1) and ($2 is null or j.status = $2)
+         order by c.cohort_id desc limit $3 offset $4"
     ));
     sqlx::query_as(sql)
         .bind(model_id)
@@ -206,8 +206,8 @@ pub async fn list(
 }
 
 /// Deletes a cohort (its shapes and metrics cascade) inside the caller's transaction.
-pub async fn delete(conn: &mut SqliteConnection, cohort_id: i64) -> sqlx::Result<bool> {
-    let done = sqlx::query("delete from cohort where cohort_id = ?")
+pub async fn delete(conn: &mut super::Conn, cohort_id: i64) -> sqlx::Result<bool> {
+    let done = sqlx::query("delete from cohort where cohort_id = $1")
         .bind(cohort_id)
         .execute(conn)
         .await?;

@@ -1,10 +1,8 @@
-//! Ids that are never reused. SQLite gives a new `integer primary key` row one above the
-//! largest id present, so deleting the newest job, cohort, shape or anchor would hand its id,
-//! and the URLs built on it, to the next one: a client or cache holding the old resource
-//! (meshes are served as immutable) would then be served another's. Every id is taken from
-//! `id_high_water`, whose mark per resource only goes up, inside the inserting transaction.
-
-use sqlx::SqliteConnection;
+//! Ids that are never reused. Taking one above the largest id present would hand a deleted
+//! newest job, cohort, shape or anchor's id, and the URLs built on it, to the next one: a
+//! client or cache holding the old resource (meshes are served as immutable) would then be
+//! served another's. Every id is taken from `id_high_water`, whose mark per resource only
+//! goes up, inside the inserting transaction.
 
 /// A resource whose ids are allocated here.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -30,7 +28,9 @@ macro_rules! allocate_sql {
             $column,
             "), 0) + 1 from ",
             $table,
-            ")) on conflict (resource) do update set last_id = max(last_id + 1, excluded.last_id)
+            ")) on conflict (resource) do update set last_id =
+                 case when id_high_water.last_id + 1 > excluded.last_id
+                      then id_high_water.last_id + 1 else excluded.last_id end
              returning last_id"
         )
     };
@@ -49,7 +49,7 @@ impl IdKind {
 
 /// A new id for `kind`, never handed out before. Call it inside the write transaction that
 /// inserts the row: a rollback returns the id with everything else.
-pub async fn allocate(conn: &mut SqliteConnection, kind: IdKind) -> sqlx::Result<i64> {
+pub async fn allocate(conn: &mut super::Conn, kind: IdKind) -> sqlx::Result<i64> {
     sqlx::query_scalar(kind.allocate_sql())
         .fetch_one(conn)
         .await

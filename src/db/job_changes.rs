@@ -2,8 +2,6 @@
 //! change of a job (claimed, progress, cancel requested, finished) sets its `updated_at`,
 //! so the jobs touched since a moment are the rows at or after it.
 
-use sqlx::SqlitePool;
-
 use super::jobs::JobRow;
 
 /// A job row with the time it last changed.
@@ -21,12 +19,12 @@ const COLUMNS: &str = "job_id, kind, payload, status, attempts, progress_done, p
 
 /// Jobs changed at or after `since`, oldest change first (at most `limit`).
 pub async fn changed_since(
-    pool: &SqlitePool,
+    pool: &super::Pool,
     since: &str,
     limit: i64,
 ) -> sqlx::Result<Vec<ChangedJob>> {
     let sql = format!(
-        "select {COLUMNS} from job where updated_at >= ? order by updated_at, job_id limit ?"
+        "select {COLUMNS} from job where updated_at >= $1 order by updated_at, job_id limit $2"
     );
     sqlx::query_as(sqlx::AssertSqlSafe(sql))
         .bind(since)
@@ -36,7 +34,7 @@ pub async fn changed_since(
 }
 
 /// Jobs still queued or running, in id order (what a new subscriber starts from).
-pub async fn active(pool: &SqlitePool) -> sqlx::Result<Vec<ChangedJob>> {
+pub async fn active(pool: &super::Pool) -> sqlx::Result<Vec<ChangedJob>> {
     let sql =
         format!("select {COLUMNS} from job where status in ('queued', 'running') order by job_id");
     sqlx::query_as(sqlx::AssertSqlSafe(sql))
@@ -45,7 +43,7 @@ pub async fn active(pool: &SqlitePool) -> sqlx::Result<Vec<ChangedJob>> {
 }
 
 /// The latest change of any job (None for an empty table).
-pub async fn latest_change(pool: &SqlitePool) -> sqlx::Result<Option<String>> {
+pub async fn latest_change(pool: &super::Pool) -> sqlx::Result<Option<String>> {
     sqlx::query_scalar("select max(updated_at) from job")
         .fetch_one(pool)
         .await

@@ -2,7 +2,6 @@
 //! the oldest queued row atomically, record progress and the final state.
 
 use serde::Serialize;
-use sqlx::{SqliteConnection, SqlitePool};
 
 use super::states::{JobKind, JobStatus};
 
@@ -24,7 +23,7 @@ pub struct JobRow {
     /// Units of work in total.
     pub progress_total: i64,
     /// Whether a cancel was requested.
-    pub cancel_requested: bool,
+    pub cancel_requested: super::Flag,
     /// The last error chain.
     pub error: Option<String>,
     /// When it was enqueued.
@@ -33,19 +32,6 @@ pub struct JobRow {
     pub started_at: Option<String>,
     /// When it reached a final state.
     pub finished_at: Option<String>,
-}
-
-/// A job a worker has just claimed.
-#[derive(Debug, Clone, sqlx::FromRow)]
-pub struct ClaimedJob {
-    /// Primary key.
-    pub job_id: i64,
-    /// What it does.
-    pub kind: JobKind,
-    /// JSON payload (typed by [`crate::jobs::Job`]).
-    pub payload: String,
-    /// Claims so far, this one included.
-    pub attempts: i64,
 }
 
 /// The final states a worker can record.
@@ -73,14 +59,14 @@ impl FinalStatus {
 /// Adds a queued job inside the caller's transaction and returns its id (only
 /// [`crate::jobs::queue`] calls it, with a typed payload).
 pub async fn enqueue(
-    conn: &mut SqliteConnection,
+    conn: &mut super::Conn,
     kind: JobKind,
     payload: &str,
     progress_total: i64,
 ) -> sqlx::Result<i64> {
     let job_id = super::ids::allocate(&mut *conn, super::ids::IdKind::Job).await?;
     sqlx::query_scalar(
-        "insert into job (job_id, kind, payload, progress_total) values (?, ?, ?, ?)
+        "insert into job (job_id, kind, payload, progress_total) values ($1, $2, $3, $4)
          returning job_id",
     )
     .bind(job_id)
@@ -91,69 +77,43 @@ pub async fn enqueue(
     .await
 }
 
-/// Atomically marks the oldest queued job as running and returns it (None when idle).
-/// One statement, so two workers can never claim the same row.
-pub async fn claim_next(pool: &SqlitePool) -> sqlx::Result<Option<ClaimedJob>> {
-    sqlx::query_as(
+/// Marks a queued job running (its first task was claimed) and counts the start.
+pub async fn start(conn: &mut super::Conn, job_id: i64) -> sqlx::Result<()> {
+    sqlx::query(
         "update job set status = 'running', attempts = attempts + 1,
-             claim_progress = progress_done, claim_setup = setup_done,
              started_at = coalesce(started_at, strftime('%Y-%m-%dT%H:%M:%fZ', 'now')),
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where job_id = (select job_id from job where status = 'queued' order by job_id limit 1)
-         returning job_id, kind, payload, attempts",
+         where job_id = $1 and status = 'queued'",
     )
-    .fetch_optional(pool)
-    .await
+    .bind(job_id)
+    .execute(conn)
+    .await?;
+    Ok(())
 }
 
-/// At startup: jobs left `running` by a stopped process go back to the queue. An
-/// interrupted run that committed progress (`progress_done` or its stored setup,
-/// `setup_done`, grew since the claim) clears the job's stall count; one that did not adds to it, and a job stalled `max_attempts` times in
-/// a row fails, so a job that keeps killing the process cannot loop forever while a long
-/// job on a host that is restarted often still finishes. Returns (re-queued, failed).
-pub async fn requeue_interrupted(pool: &SqlitePool, max_attempts: i64) -> sqlx::Result<(u64, u64)> {
-    let mut tx = pool.begin_with(super::BEGIN_WRITE).await?;
+/// A running job none of whose tasks is held any more goes back to `queued` (its tasks
+/// were given back at shutdown), so it shows as waiting, not as running.
+pub async fn queue_if_idle(conn: &mut super::Conn, job_id: i64) -> sqlx::Result<()> {
     sqlx::query(
-        "update job set stalled_attempts = case when progress_done > claim_progress
-                                                     or setup_done > claim_setup then 0
-                                                else stalled_attempts + 1 end
-         where status = 'running'",
+        "update job set status = 'queued', updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = $1 and status = 'running'
+           and not exists (select 1 from task where task.job_id = job.job_id
+                               and task.status = 'running')",
     )
-    .execute(&mut *tx)
+    .bind(job_id)
+    .execute(conn)
     .await?;
-    let failed = sqlx::query(
-        "update job set status = 'failed', cancel_requested = 0,
-             error = 'interrupted ' || stalled_attempts ||
-                     ' times in a row without progress; not retried again',
-             finished_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now'),
-             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where status = 'running' and stalled_attempts >= ?",
-    )
-    .bind(max_attempts)
-    .execute(&mut *tx)
-    .await?
-    .rows_affected();
-    let requeued = sqlx::query(
-        "update job set status = case when cancel_requested = 1 then 'cancelled' else 'queued' end,
-             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where status = 'running'",
-    )
-    .execute(&mut *tx)
-    .await?
-    .rows_affected();
-    tx.commit().await?;
-    Ok((requeued, failed))
+    Ok(())
 }
 
 /// Puts a failed or cancelled job back in the queue (inside the caller's transaction, the
-/// one [`crate::jobs::Submission`] opened), its attempt and stall counts cleared; returns
-/// whether it was in such a state.
-pub async fn requeue_finished(conn: &mut SqliteConnection, job_id: i64) -> sqlx::Result<bool> {
+/// one [`crate::jobs::Submission`] opened); returns whether it was in such a state.
+pub async fn requeue_finished(conn: &mut super::Conn, job_id: i64) -> sqlx::Result<bool> {
     let done = sqlx::query(
-        "update job set status = 'queued', cancel_requested = 0, error = null,
-             finished_at = null, attempts = 0, stalled_attempts = 0,
+        "update job set status = 'queued', cancel_requested = 0, error = null, attempts = 0,
+             finished_at = null,
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where job_id = ? and status in ('failed', 'cancelled')",
+         where job_id = $1 and status in ('failed', 'cancelled')",
     )
     .bind(job_id)
     .execute(conn)
@@ -161,44 +121,33 @@ pub async fn requeue_finished(conn: &mut SqliteConnection, job_id: i64) -> sqlx:
     Ok(done.rows_affected() == 1)
 }
 
-/// Puts a running job back in the queue (graceful shutdown in the middle of it).
-pub async fn release(pool: &SqlitePool, job_id: i64) -> sqlx::Result<()> {
-    sqlx::query(
-        "update job set status = 'queued', updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where job_id = ? and status = 'running'",
-    )
-    .bind(job_id)
-    .execute(pool)
-    .await?;
-    Ok(())
-}
-
-/// Records a running job's final state.
+/// Records a job's final state unless it has one already; returns whether it changed (the
+/// caller then ends what the job worked on, in the same transaction).
 pub async fn finish(
-    pool: &SqlitePool,
+    conn: &mut super::Conn,
     job_id: i64,
     status: FinalStatus,
     error: Option<&str>,
-) -> sqlx::Result<()> {
-    sqlx::query(
-        "update job set status = ?, error = ?,
+) -> sqlx::Result<bool> {
+    let done = sqlx::query(
+        "update job set status = $1, error = $2,
              finished_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now'),
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where job_id = ?",
+         where job_id = $3 and status in ('queued', 'running')",
     )
     .bind(status.status())
     .bind(error)
     .bind(job_id)
-    .execute(pool)
+    .execute(conn)
     .await?;
-    Ok(())
+    Ok(done.rows_affected() == 1)
 }
 
 /// Sets the progress counters (inside the transaction that committed the unit of work).
-pub async fn set_progress(conn: &mut SqliteConnection, job_id: i64, done: i64) -> sqlx::Result<()> {
+pub async fn set_progress(conn: &mut super::Conn, job_id: i64, done: i64) -> sqlx::Result<()> {
     sqlx::query(
-        "update job set progress_done = ?, updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where job_id = ?",
+        "update job set progress_done = $1, updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = $2",
     )
     .bind(done)
     .bind(job_id)
@@ -207,61 +156,62 @@ pub async fn set_progress(conn: &mut SqliteConnection, job_id: i64, done: i64) -
     Ok(())
 }
 
-/// What a cancel request did.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum CancelOutcome {
-    /// The job was still queued and is now cancelled.
-    CancelledWhileQueued,
-    /// The job is running; its worker will stop at the next check.
-    Requested,
-    /// The job had already reached a final state.
-    AlreadyFinished,
+/// Flags a queued or running job for cancellation (inside the caller's transaction, which
+/// then settles it); returns its status, or None when there is no such job.
+pub async fn request_cancel(
+    conn: &mut super::Conn,
+    job_id: i64,
+) -> sqlx::Result<Option<JobStatus>> {
+    sqlx::query(
+        "update job set cancel_requested = 1, updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = $1 and status in ('queued', 'running')",
+    )
+    .bind(job_id)
+    .execute(&mut *conn)
+    .await?;
+    sqlx::query_scalar("select status from job where job_id = $1")
+        .bind(job_id)
+        .fetch_optional(conn)
+        .await
 }
 
-/// Cancels a queued job at once, or flags a running one for its worker.
-pub async fn request_cancel(pool: &SqlitePool, job_id: i64) -> sqlx::Result<CancelOutcome> {
-    let queued = sqlx::query(
-        "update job set status = 'cancelled', cancel_requested = 1,
-             finished_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now'),
-             updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where job_id = ? and status = 'queued'",
+/// A job's kind and payload (what ending it must also end).
+pub async fn kind_and_payload(
+    conn: &mut super::Conn,
+    job_id: i64,
+) -> sqlx::Result<Option<(JobKind, String)>> {
+    sqlx::query_as("select kind, payload from job where job_id = $1")
+        .bind(job_id)
+        .fetch_optional(conn)
+        .await
+}
+
+/// Pending jobs flagged for cancellation (their workers may all be gone: someone must
+/// settle them).
+pub async fn cancel_requested_pending(pool: &super::Pool) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar(
+        "select job_id from job where cancel_requested = 1 and status in ('queued', 'running')",
     )
-    .bind(job_id)
-    .execute(pool)
-    .await?;
-    if queued.rows_affected() == 1 {
-        return Ok(CancelOutcome::CancelledWhileQueued);
-    }
-    let running = sqlx::query(
-        "update job set cancel_requested = 1, updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where job_id = ? and status = 'running'",
-    )
-    .bind(job_id)
-    .execute(pool)
-    .await?;
-    Ok(if running.rows_affected() == 1 {
-        CancelOutcome::Requested
-    } else {
-        CancelOutcome::AlreadyFinished
-    })
+    .fetch_all(pool)
+    .await
 }
 
 /// Whether a cancel was requested for the job (checked by workers between units of work).
-pub async fn is_cancel_requested(pool: &SqlitePool, job_id: i64) -> sqlx::Result<bool> {
-    let flag: Option<bool> =
-        sqlx::query_scalar("select cancel_requested from job where job_id = ?")
+pub async fn is_cancel_requested(pool: &super::Pool, job_id: i64) -> sqlx::Result<bool> {
+    let flag: Option<super::Flag> =
+        sqlx::query_scalar("select cancel_requested from job where job_id = $1")
             .bind(job_id)
             .fetch_optional(pool)
             .await?;
-    Ok(flag.unwrap_or(true))
+    Ok(flag.is_none_or(bool::from))
 }
 
 /// One job by id.
-pub async fn get(pool: &SqlitePool, job_id: i64) -> sqlx::Result<Option<JobRow>> {
+pub async fn get(pool: &super::Pool, job_id: i64) -> sqlx::Result<Option<JobRow>> {
     sqlx::query_as(
         "select job_id, kind, payload, status, attempts, progress_done, progress_total,
                 cancel_requested, error, created_at, started_at, finished_at
-         from job where job_id = ?",
+         from job where job_id = $1",
     )
     .bind(job_id)
     .fetch_optional(pool)
@@ -269,22 +219,24 @@ pub async fn get(pool: &SqlitePool, job_id: i64) -> sqlx::Result<Option<JobRow>>
 }
 
 /// Jobs waiting or running: the queue length that bounds new submissions.
-pub async fn count_pending<'e>(ex: impl sqlx::SqliteExecutor<'e>) -> sqlx::Result<i64> {
+pub async fn count_pending<'e>(
+    ex: impl sqlx::Executor<'e, Database = sqlx::Any>,
+) -> sqlx::Result<i64> {
     sqlx::query_scalar("select count(*) from job where status in ('queued', 'running')")
         .fetch_one(ex)
         .await
 }
 
 /// Number of jobs in each state (for /metrics).
-pub async fn count_by_status(pool: &SqlitePool) -> sqlx::Result<Vec<(JobStatus, i64)>> {
+pub async fn count_by_status(pool: &super::Pool) -> sqlx::Result<Vec<(JobStatus, i64)>> {
     sqlx::query_as("select status, count(*) from job group by status order by status")
         .fetch_all(pool)
         .await
 }
 
 /// Deletes a job row (after its cohort was deleted).
-pub async fn delete(conn: &mut SqliteConnection, job_id: i64) -> sqlx::Result<()> {
-    sqlx::query("delete from job where job_id = ?")
+pub async fn delete(conn: &mut super::Conn, job_id: i64) -> sqlx::Result<()> {
+    sqlx::query("delete from job where job_id = $1")
         .bind(job_id)
         .execute(conn)
         .await?;

@@ -3,6 +3,7 @@
 //! connection and returning a typed row.
 
 pub mod anchors;
+pub mod blobs;
 pub mod cohort_metrics;
 pub mod cohorts;
 pub mod ids;
@@ -13,30 +14,79 @@ pub mod novelty_surfaces;
 pub mod shapes;
 pub mod simulations;
 pub mod states;
+pub mod tasks;
 pub mod thumbnails;
 
-use std::str::FromStr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use anyhow::Context;
-use sqlx::SqlitePool;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+use sqlx::Connection;
+use sqlx::any::{AnyConnectOptions, AnyPoolOptions};
 
-/// The statement that opens every write transaction. A deferred transaction that reads
-/// first and writes later can fail with SQLITE_BUSY at once instead of waiting, so writers
-/// take the write lock up front and let the busy timeout do its job.
-pub const BEGIN_WRITE: &str = "BEGIN IMMEDIATE";
+pub use values::{Flag, Json};
+
+mod values;
+
+/// The connection pool of either backend. SQL is written once, in the dialect both share
+/// (`$n` parameters, `on conflict`, `returning`); what differs is confined to this module
+/// and the per-backend migrations.
+pub type Pool = sqlx::AnyPool;
+/// One connection of [`Pool`] (the inside of a transaction).
+pub type Conn = sqlx::AnyConnection;
+/// A write transaction opened by [`begin_write`].
+pub type Tx = sqlx::Transaction<'static, sqlx::Any>;
+
+/// Anything a query runs on: the pool, or a connection inside a transaction.
+pub trait Executor<'e>: sqlx::Executor<'e, Database = sqlx::Any> {}
+
+impl<'e, T: sqlx::Executor<'e, Database = sqlx::Any>> Executor<'e> for T {}
+
+/// The storage engine behind a [`Pool`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// One SQLite file: the embedded default.
+    Sqlite,
+    /// A PostgreSQL server: several processes and machines share one database.
+    Postgres,
+}
+
+impl Backend {
+    /// The backend a database URL names (`sqlite:` or `postgres:`/`postgresql:`).
+    pub fn of_url(url: &str) -> anyhow::Result<Self> {
+        match url.split_once(':').map(|(scheme, _)| scheme) {
+            Some("sqlite") => Ok(Self::Sqlite),
+            Some("postgres" | "postgresql") => Ok(Self::Postgres),
+            _ => anyhow::bail!(
+                "AORTAGEN_DATABASE_URL must start with sqlite: or postgres: (got {url:?})"
+            ),
+        }
+    }
+
+    /// The backend of an open pool.
+    pub fn of(pool: &Pool) -> Self {
+        match pool.connect_options().database_url.scheme() {
+            "sqlite" => Self::Sqlite,
+            _ => Self::Postgres,
+        }
+    }
+
+    /// A name for logs and `/metrics`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Sqlite => "sqlite",
+            Self::Postgres => "postgres",
+        }
+    }
+}
 
 /// How long a connection waits for another writer before giving up.
 const BUSY_TIMEOUT: Duration = Duration::from_secs(10);
 
-/// Opens (creating if needed) the SQLite database at `url` and runs the embedded migrations.
-///
-/// WAL lets readers proceed while a worker commits shapes; foreign keys are off by default
-/// in SQLite and the schema relies on them for cascades.
-pub async fn connect(url: &str, max_connections: u32) -> anyhow::Result<SqlitePool> {
+/// Opens the database at `url` and runs the embedded migrations of its backend. A SQLite
+/// file and its directory are created when missing.
+pub async fn connect(url: &str, max_connections: u32) -> anyhow::Result<Pool> {
     connect_with_switch(url, max_connections, &ReadOnlySwitch::default()).await
 }
 
@@ -45,25 +95,44 @@ pub async fn connect_with_switch(
     url: &str,
     max_connections: u32,
     switch: &ReadOnlySwitch,
-) -> anyhow::Result<SqlitePool> {
-    let options = SqliteConnectOptions::from_str(url)
-        .with_context(|| format!("invalid database URL {url:?}"))?
-        .create_if_missing(true)
-        .journal_mode(SqliteJournalMode::Wal)
-        .synchronous(SqliteSynchronous::Normal)
-        .busy_timeout(BUSY_TIMEOUT)
-        .foreign_keys(true);
-    let file = options.get_filename().to_path_buf();
-    if let Some(dir) = file.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create the database directory {}", dir.display()))?;
-    }
+) -> anyhow::Result<Pool> {
+    let pool = open(url, max_connections, switch).await?;
+    migrate(&pool).await?;
+    Ok(pool)
+}
+
+/// Opens the database at `url` without touching its schema (what a worker does: only
+/// `aortagen migrate` and `aortagen serve` change the schema).
+pub async fn open(
+    url: &str,
+    max_connections: u32,
+    switch: &ReadOnlySwitch,
+) -> anyhow::Result<Pool> {
+    sqlx::any::install_default_drivers();
+    let backend = Backend::of_url(url)?;
+    let url = match backend {
+        Backend::Sqlite => prepare_sqlite_file(url).await?,
+        Backend::Postgres => url.to_owned(),
+    };
+    let options: AnyConnectOptions = url
+        .parse()
+        .with_context(|| format!("invalid database URL {}", redact(&url)))?;
     let switch = switch.clone();
-    let pool = SqlitePoolOptions::new()
+    let pool = AnyPoolOptions::new()
+        .after_connect(move |conn, _| {
+            Box::pin(async move {
+                if backend == Backend::Sqlite {
+                    sqlx::Executor::execute(&mut *conn, SQLITE_CONNECTION_PRAGMAS).await?;
+                }
+                Ok(())
+            })
+        })
         .before_acquire(move |conn, _| {
             let switch = switch.clone();
             Box::pin(async move {
-                switch.apply(conn).await?;
+                if backend == Backend::Sqlite {
+                    switch.apply(conn).await?;
+                }
                 Ok(true)
             })
         })
@@ -71,17 +140,111 @@ pub async fn connect_with_switch(
         .acquire_timeout(Duration::from_secs(30))
         .connect_with(options)
         .await
-        .with_context(|| format!("cannot open the database {}", file.display()))?;
-    migrate(&pool).await?;
+        .with_context(|| format!("cannot open the database {}", redact(&url)))?;
     Ok(pool)
 }
 
-/// Applies the migrations embedded from `migrations/` at compile time.
-pub async fn migrate(pool: &SqlitePool) -> anyhow::Result<()> {
-    sqlx::migrate!()
+/// Per-connection SQLite settings: a busy timeout so writers queue instead of failing,
+/// foreign keys (off by default in SQLite; the schema relies on them for cascades), and
+/// `synchronous = normal`, which is durable in WAL mode.
+const SQLITE_CONNECTION_PRAGMAS: &str = concat!(
+    "pragma busy_timeout = 10000; ",
+    "pragma foreign_keys = on; ",
+    "pragma synchronous = normal;"
+);
+
+/// Creates a SQLite file's directory and the file itself in WAL mode (readers proceed while
+/// a worker commits shapes; the mode is stored in the file), once, before the pool opens
+/// connections to it; returns the URL to open.
+async fn prepare_sqlite_file(url: &str) -> anyhow::Result<String> {
+    use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode};
+    use std::str::FromStr;
+    let options = SqliteConnectOptions::from_str(url)
+        .with_context(|| format!("invalid database URL {url:?}"))?
+        .create_if_missing(true)
+        .journal_mode(SqliteJournalMode::Wal)
+        .busy_timeout(BUSY_TIMEOUT);
+    let file = options.get_filename().to_path_buf();
+    if let Some(dir) = file.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the database directory {}", dir.display()))?;
+    }
+    let conn = sqlx::SqliteConnection::connect_with(&options)
+        .await
+        .with_context(|| format!("cannot open the database {}", file.display()))?;
+    conn.close().await?;
+    Ok(url.to_owned())
+}
+
+/// A database URL with its password replaced, for messages.
+pub fn redact(url: &str) -> String {
+    match url::Url::parse(url) {
+        Ok(mut parsed) if parsed.password().is_some() => {
+            let _ = parsed.set_password(Some("***"));
+            parsed.to_string()
+        }
+        _ => url.to_owned(),
+    }
+}
+
+/// Applies the migrations of the pool's backend, embedded from `migrations/<backend>/` at
+/// compile time. Both sets carry the same version numbers and describe the same schema
+/// (a test compares them).
+pub async fn migrate(pool: &Pool) -> anyhow::Result<()> {
+    migrator(pool)
         .run(pool)
         .await
         .context("cannot apply database migrations")
+}
+
+/// The migrations embedded for the pool's backend.
+fn migrator(pool: &Pool) -> sqlx::migrate::Migrator {
+    match Backend::of(pool) {
+        Backend::Sqlite => sqlx::migrate!("migrations/sqlite"),
+        Backend::Postgres => sqlx::migrate!("migrations/postgres"),
+    }
+}
+
+/// Checks that the database has every migration this version embeds, and no other (what a
+/// worker does instead of migrating: only `aortagen migrate` and `aortagen serve` change
+/// the schema, so a worker of another version never touches it).
+pub async fn require_current_schema(pool: &Pool) -> anyhow::Result<()> {
+    let expected: Vec<i64> = migrator(pool).iter().map(|m| m.version).collect();
+    let applied: Vec<i64> =
+        sqlx::query_scalar("select version from _sqlx_migrations where success order by version")
+            .fetch_all(pool)
+            .await
+            .context("cannot read the database's migrations (run `aortagen migrate` first)")?;
+    let missing: Vec<i64> = expected
+        .iter()
+        .filter(|v| !applied.contains(v))
+        .copied()
+        .collect();
+    let unknown: Vec<i64> = applied
+        .iter()
+        .filter(|v| !expected.contains(v))
+        .copied()
+        .collect();
+    anyhow::ensure!(
+        missing.is_empty(),
+        "the database lacks migrations {missing:?}: run `aortagen migrate` with this version first"
+    );
+    anyhow::ensure!(
+        unknown.is_empty(),
+        "the database has migrations {unknown:?} this version does not know: it was migrated by a newer version"
+    );
+    Ok(())
+}
+
+/// Opens a write transaction. On SQLite it takes the write lock up front
+/// (`BEGIN IMMEDIATE`): a deferred transaction that reads first and writes later can fail
+/// with SQLITE_BUSY at once instead of waiting for the busy timeout. PostgreSQL's row locks
+/// need nothing special.
+pub async fn begin_write(pool: &Pool) -> sqlx::Result<Tx> {
+    match Backend::of(pool) {
+        Backend::Sqlite => pool.begin_with("BEGIN IMMEDIATE").await,
+        Backend::Postgres => pool.begin().await,
+    }
 }
 
 /// True when `err` is a violated UNIQUE constraint. SQLite reports no constraint names,
@@ -99,6 +262,8 @@ pub enum StorageFault {
     Full,
     /// The storage device reported an I/O error.
     Io,
+    /// The database server cannot be reached (down, restarting, out of connections).
+    Unreachable,
 }
 
 impl std::fmt::Display for StorageFault {
@@ -107,24 +272,39 @@ impl std::fmt::Display for StorageFault {
             Self::ReadOnly => "database is read-only",
             Self::Full => "disk is full",
             Self::Io => "storage I/O error",
+            Self::Unreachable => "database unreachable",
         })
     }
 }
 
-/// Classifies a database error as a storage fault by SQLite's primary result code
-/// (SQLITE_READONLY, SQLITE_FULL, SQLITE_IOERR, SQLITE_CANTOPEN) or the I/O error kind.
+/// Classifies a database error as a storage fault: SQLite's primary result codes
+/// (SQLITE_READONLY, SQLITE_FULL, SQLITE_IOERR, SQLITE_CANTOPEN), PostgreSQL's SQLSTATEs
+/// (read-only transaction, disk full, I/O error), a server that cannot be reached, or the
+/// I/O error kind.
 pub fn storage_fault(err: &sqlx::Error) -> Option<StorageFault> {
     match err {
         sqlx::Error::Database(db) => {
-            let code: i32 = db.code()?.parse().ok()?;
-            match code & 0xff {
-                8 => Some(StorageFault::ReadOnly),
-                13 => Some(StorageFault::Full),
-                10 | 14 => Some(StorageFault::Io),
+            let code = db.code()?;
+            if db.try_downcast_ref::<sqlx::sqlite::SqliteError>().is_some() {
+                let code: i32 = code.parse().ok()?;
+                return match code & 0xff {
+                    8 => Some(StorageFault::ReadOnly),
+                    13 => Some(StorageFault::Full),
+                    10 | 14 => Some(StorageFault::Io),
+                    _ => None,
+                };
+            }
+            match &*code {
+                "25006" => Some(StorageFault::ReadOnly),
+                "53100" => Some(StorageFault::Full),
+                "58030" => Some(StorageFault::Io),
+                // the server is shutting down or restarting, or refuses connections for now
+                "57P01" | "57P02" | "57P03" | "53300" => Some(StorageFault::Unreachable),
                 _ => None,
             }
         }
-        sqlx::Error::Io(io) => io_fault(io),
+        sqlx::Error::Io(io) => io_fault(io).or(Some(StorageFault::Unreachable)),
+        sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed => Some(StorageFault::Unreachable),
         _ => None,
     }
 }
@@ -153,7 +333,7 @@ fn io_fault(err: &std::io::Error) -> Option<StorageFault> {
 
 /// Checks that the database takes a write: an upsert of the single probe row, committed.
 /// It fails the way real writes fail when the file is read-only or the disk is full.
-pub async fn probe_write(pool: &SqlitePool) -> sqlx::Result<()> {
+pub async fn probe_write(pool: &Pool) -> sqlx::Result<()> {
     sqlx::query(
         "insert into storage_probe (id, checked_at) values (1, strftime('%Y-%m-%dT%H:%M:%fZ', 'now'))
          on conflict (id) do update set checked_at = excluded.checked_at",
@@ -179,7 +359,7 @@ impl ReadOnlySwitch {
         self.on.store(read_only, Ordering::SeqCst);
     }
 
-    async fn apply(&self, conn: &mut sqlx::SqliteConnection) -> sqlx::Result<()> {
+    async fn apply(&self, conn: &mut Conn) -> sqlx::Result<()> {
         if !self.used.load(Ordering::SeqCst) {
             return Ok(());
         }

@@ -1,8 +1,7 @@
 //! The `model` table: the registry of generative models cohorts can be drawn from.
 
+use super::Json;
 use serde::Serialize;
-use sqlx::types::Json;
-use sqlx::{SqliteConnection, SqlitePool};
 
 use super::states::ModelStatus;
 use crate::cohort::targets::feasibility::TrainingAnatomy;
@@ -32,14 +31,14 @@ impl ModelRow {
 
 /// Registers a model unless the id is taken; returns whether a row was inserted.
 pub async fn insert_if_absent(
-    conn: &mut SqliteConnection,
+    conn: &mut super::Conn,
     model_id: &str,
     dir_path: &str,
     manifest: Option<&ModelInfo>,
     status: ModelStatus,
 ) -> sqlx::Result<bool> {
     let done = sqlx::query(
-        "insert into model (model_id, dir_path, manifest, status) values (?, ?, ?, ?)
+        "insert into model (model_id, dir_path, manifest, status) values ($1, $2, $3, $4)
          on conflict (model_id) do nothing",
     )
     .bind(model_id)
@@ -52,16 +51,16 @@ pub async fn insert_if_absent(
 }
 
 /// Records the outcome of a training job.
-pub async fn set_trained(
-    pool: &SqlitePool,
+pub async fn set_trained<'e>(
+    pool: impl super::Executor<'e>,
     model_id: &str,
     status: ModelStatus,
     manifest: Option<&ModelInfo>,
 ) -> sqlx::Result<()> {
     sqlx::query(
-        "update model set status = ?, manifest = coalesce(?, manifest),
+        "update model set status = $1, manifest = coalesce($2, manifest),
              updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
-         where model_id = ?",
+         where model_id = $3",
     )
     .bind(status)
     .bind(manifest.map(Json))
@@ -72,9 +71,9 @@ pub async fn set_trained(
 }
 
 /// One model by id.
-pub async fn get(pool: &SqlitePool, model_id: &str) -> sqlx::Result<Option<ModelRow>> {
+pub async fn get(pool: &super::Pool, model_id: &str) -> sqlx::Result<Option<ModelRow>> {
     sqlx::query_as(
-        "select model_id, dir_path, manifest, status, created_at from model where model_id = ?",
+        "select model_id, dir_path, manifest, status, created_at from model where model_id = $1",
     )
     .bind(model_id)
     .fetch_optional(pool)
@@ -82,7 +81,7 @@ pub async fn get(pool: &SqlitePool, model_id: &str) -> sqlx::Result<Option<Model
 }
 
 /// All models, oldest first.
-pub async fn list(pool: &SqlitePool) -> sqlx::Result<Vec<ModelRow>> {
+pub async fn list(pool: &super::Pool) -> sqlx::Result<Vec<ModelRow>> {
     sqlx::query_as(
         "select model_id, dir_path, manifest, status, created_at from model
          order by created_at, model_id",
@@ -92,16 +91,16 @@ pub async fn list(pool: &SqlitePool) -> sqlx::Result<Vec<ModelRow>> {
 }
 
 /// Number of cohorts drawn from the model (a model in use cannot be deleted).
-pub async fn cohort_count(pool: &SqlitePool, model_id: &str) -> sqlx::Result<i64> {
-    sqlx::query_scalar("select count(*) from cohort where model_id = ?")
+pub async fn cohort_count(pool: &super::Pool, model_id: &str) -> sqlx::Result<i64> {
+    sqlx::query_scalar("select count(*) from cohort where model_id = $1")
         .bind(model_id)
         .fetch_one(pool)
         .await
 }
 
 /// Removes a model row; returns whether it existed.
-pub async fn delete(pool: &SqlitePool, model_id: &str) -> sqlx::Result<bool> {
-    let done = sqlx::query("delete from model where model_id = ?")
+pub async fn delete(pool: &super::Pool, model_id: &str) -> sqlx::Result<bool> {
+    let done = sqlx::query("delete from model where model_id = $1")
         .bind(model_id)
         .execute(pool)
         .await?;
@@ -110,11 +109,11 @@ pub async fn delete(pool: &SqlitePool, model_id: &str) -> sqlx::Result<bool> {
 
 /// The model's stored training-shape measurements, if computed.
 pub async fn training_anatomy(
-    pool: &SqlitePool,
+    pool: &super::Pool,
     model_id: &str,
 ) -> sqlx::Result<Option<TrainingAnatomy>> {
     let stored: Option<Option<Json<TrainingAnatomy>>> =
-        sqlx::query_scalar("select training_anatomy from model where model_id = ?")
+        sqlx::query_scalar("select training_anatomy from model where model_id = $1")
             .bind(model_id)
             .fetch_optional(pool)
             .await?;
@@ -122,12 +121,12 @@ pub async fn training_anatomy(
 }
 
 /// Stores the model's training-shape measurements.
-pub async fn set_training_anatomy(
-    pool: &SqlitePool,
+pub async fn set_training_anatomy<'e>(
+    pool: impl super::Executor<'e>,
     model_id: &str,
     measured: &TrainingAnatomy,
 ) -> sqlx::Result<()> {
-    sqlx::query("update model set training_anatomy = ? where model_id = ?")
+    sqlx::query("update model set training_anatomy = $1 where model_id = $2")
         .bind(Json(measured))
         .bind(model_id)
         .execute(pool)

@@ -1,7 +1,6 @@
 //! The `shape` table: generated shapes with provenance, measures and the stored mesh.
 
-use sqlx::types::Json;
-use sqlx::{SqliteConnection, SqlitePool};
+use super::Json;
 
 use crate::anatomy::shape::ShapeAnatomy;
 use crate::cohort::Selection;
@@ -35,9 +34,7 @@ pub struct NewShape<'a> {
     pub centre: [f64; 3],
     /// Unit-ball → mm scale.
     pub radius: f64,
-    /// Encoded unit-ball mesh ([`crate::formats::mesh_blob`]).
-    pub mesh: &'a [u8],
-    /// Hex SHA-256 of `mesh`.
+    /// Hex SHA-256 of the encoded unit-ball mesh, stored in the object store beforehand.
     pub mesh_sha256: &'a str,
     /// Latent noise it was drawn with.
     pub latent_noise: f64,
@@ -115,7 +112,7 @@ pub struct ShapeRow {
     /// Index of that training shape.
     pub nearest_training_index: Option<i64>,
     /// Whether the cohort's min_novelty is met.
-    pub novelty_met: Option<bool>,
+    pub novelty_met: Option<super::Flag>,
     /// Anatomical measurements.
     pub anatomy: Option<Json<ShapeAnatomy>>,
     /// Why the measurements failed.
@@ -123,7 +120,7 @@ pub struct ShapeRow {
     /// Candidates drawn (targeted cohorts).
     pub candidates: Option<i64>,
     /// Whether the kept shape meets every target (targeted cohorts).
-    pub targets_met: Option<bool>,
+    pub targets_met: Option<super::Flag>,
     /// Commit time.
     pub created_at: String,
     /// Anchors mixed (ids from `shape_anchor`, in mixture order), if any.
@@ -136,14 +133,12 @@ pub struct ShapeRow {
     pub sampler: Option<Json<crate::cohort::SamplerFields>>,
 }
 
-/// A shape's stored mesh and the transform to mm.
+/// Where a shape's mesh is and the transform to mm.
 #[derive(Debug, Clone, sqlx::FromRow)]
-pub struct StoredMesh {
+pub struct MeshRef {
     /// Shape id.
     pub shape_id: i64,
-    /// Encoded unit-ball mesh.
-    pub mesh: Vec<u8>,
-    /// Hex SHA-256 of `mesh`.
+    /// Hex SHA-256 of the encoded unit-ball mesh: its name in the object store.
     pub mesh_sha256: String,
     /// Transform centre x.
     pub centre_x: f64,
@@ -161,27 +156,25 @@ const SELECT: &str = "select s.shape_id, s.cohort_id, c.model_id, s.shape_index,
         s.centre_x, s.centre_y, s.centre_z, s.radius, s.mesh_sha256, s.latent_noise,
         s.selection, s.attempt, s.redraws, s.novelty_cd, s.nearest_training_index,
         s.novelty_met, s.anatomy, s.anatomy_error, s.candidates, s.targets_met, s.created_at,
-        (select json_group_array(anchor_id) from (select anchor_id from shape_anchor a
-            where a.shape_id = s.shape_id order by a.position) having count(*) > 0)
-            as anchor_ids,
-        (select json_group_array(name) from (select n.name from shape_anchor a
+        (select json_group_array(a.anchor_id order by a.position) from shape_anchor a
+            where a.shape_id = s.shape_id having count(*) > 0) as anchor_ids,
+        (select json_group_array(n.name order by a.position) from shape_anchor a
             join anchor n on n.anchor_id = a.anchor_id
-            where a.shape_id = s.shape_id order by a.position) having count(*) > 0)
-            as anchor_names,
+            where a.shape_id = s.shape_id having count(*) > 0) as anchor_names,
         c.seed as cohort_seed, c.sampler
     from shape s join cohort c on c.cohort_id = s.cohort_id";
 
 /// Inserts a shape inside the caller's transaction.
-pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Result<i64> {
+pub async fn insert(conn: &mut super::Conn, s: &NewShape<'_>) -> sqlx::Result<i64> {
     let shape_id = super::ids::allocate(&mut *conn, super::ids::IdKind::Shape).await?;
     sqlx::query_scalar(
         "insert into shape (shape_id, cohort_id, shape_index, training_indices, weights, seed, resolution,
              software_version, vertex_count, triangle_count, area_mm2, volume_mm3,
-             centre_x, centre_y, centre_z, radius, mesh, mesh_sha256, latent_noise, selection,
+             centre_x, centre_y, centre_z, radius, mesh_sha256, latent_noise, selection,
              attempt, redraws, novelty_cd, nearest_training_index, novelty_met, anatomy,
              anatomy_error, candidates, targets_met)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,
-             ?, ?, ?)
+         values ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, $16, $17, $18,
+             $19, $20, $21, $22, $23, $24, $25, $26, $27, $28)
          returning shape_id",
     )
     .bind(shape_id)
@@ -200,7 +193,6 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
     .bind(s.centre[1])
     .bind(s.centre[2])
     .bind(s.radius)
-    .bind(s.mesh)
     .bind(s.mesh_sha256)
     .bind(s.latent_noise)
     .bind(s.selection)
@@ -208,18 +200,18 @@ pub async fn insert(conn: &mut SqliteConnection, s: &NewShape<'_>) -> sqlx::Resu
     .bind(s.redraws)
     .bind(s.novelty_cd)
     .bind(s.nearest_training_index)
-    .bind(s.novelty_met)
+    .bind(s.novelty_met.map(super::Flag))
     .bind(s.anatomy.map(Json))
     .bind(s.anatomy_error)
     .bind(s.candidates)
-    .bind(s.targets_met)
+    .bind(s.targets_met.map(super::Flag))
     .fetch_one(conn)
     .await
 }
 
 /// Shape indices already committed for a cohort (a resumed job skips them).
-pub async fn existing_indices(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<i64>> {
-    sqlx::query_scalar("select shape_index from shape where cohort_id = ? order by shape_index")
+pub async fn existing_indices(pool: &super::Pool, cohort_id: i64) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar("select shape_index from shape where cohort_id = $1 order by shape_index")
         .bind(cohort_id)
         .fetch_all(pool)
         .await
@@ -227,13 +219,13 @@ pub async fn existing_indices(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result
 
 /// A page of a cohort's shapes in index order.
 pub async fn list_for_cohort(
-    pool: &SqlitePool,
+    pool: &super::Pool,
     cohort_id: i64,
     limit: i64,
     offset: i64,
 ) -> sqlx::Result<Vec<ShapeRow>> {
     let sql = sqlx::AssertSqlSafe(format!(
-        "{SELECT} where s.cohort_id = ? order by s.shape_index limit ? offset ?"
+        "{SELECT} where s.cohort_id = $1 order by s.shape_index limit $2 offset $3"
     ));
     sqlx::query_as(sql)
         .bind(cohort_id)
@@ -244,30 +236,30 @@ pub async fn list_for_cohort(
 }
 
 /// One shape's metadata.
-pub async fn get(pool: &SqlitePool, shape_id: i64) -> sqlx::Result<Option<ShapeRow>> {
-    let sql = sqlx::AssertSqlSafe(format!("{SELECT} where s.shape_id = ?"));
+pub async fn get(pool: &super::Pool, shape_id: i64) -> sqlx::Result<Option<ShapeRow>> {
+    let sql = sqlx::AssertSqlSafe(format!("{SELECT} where s.shape_id = $1"));
     sqlx::query_as(sql)
         .bind(shape_id)
         .fetch_optional(pool)
         .await
 }
 
-/// One shape's mesh bytes and transform.
-pub async fn get_mesh(pool: &SqlitePool, shape_id: i64) -> sqlx::Result<Option<StoredMesh>> {
+/// One shape's mesh name and transform.
+pub async fn get_mesh(pool: &super::Pool, shape_id: i64) -> sqlx::Result<Option<MeshRef>> {
     sqlx::query_as(
-        "select shape_id, mesh, mesh_sha256, centre_x, centre_y, centre_z, radius
-         from shape where shape_id = ?",
+        "select shape_id, mesh_sha256, centre_x, centre_y, centre_z, radius
+         from shape where shape_id = $1",
     )
     .bind(shape_id)
     .fetch_optional(pool)
     .await
 }
 
-/// All of a cohort's meshes in index order (for the pairwise metrics).
-pub async fn cohort_meshes(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<StoredMesh>> {
+/// All of a cohort's mesh names and transforms in index order (for the pairwise metrics).
+pub async fn cohort_meshes(pool: &super::Pool, cohort_id: i64) -> sqlx::Result<Vec<MeshRef>> {
     sqlx::query_as(
-        "select shape_id, mesh, mesh_sha256, centre_x, centre_y, centre_z, radius
-         from shape where cohort_id = ? order by shape_index",
+        "select shape_id, mesh_sha256, centre_x, centre_y, centre_z, radius
+         from shape where cohort_id = $1 order by shape_index",
     )
     .bind(cohort_id)
     .fetch_all(pool)
@@ -276,8 +268,8 @@ pub async fn cohort_meshes(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Ve
 
 /// A cohort's shape ids in index order (the rows of its pairwise matrix), without
 /// reading their meshes.
-pub async fn cohort_shape_ids(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<i64>> {
-    sqlx::query_scalar("select shape_id from shape where cohort_id = ? order by shape_index")
+pub async fn cohort_shape_ids(pool: &super::Pool, cohort_id: i64) -> sqlx::Result<Vec<i64>> {
+    sqlx::query_scalar("select shape_id from shape where cohort_id = $1 order by shape_index")
         .bind(cohort_id)
         .fetch_all(pool)
         .await
@@ -303,12 +295,12 @@ pub struct MeasureSummary {
 }
 
 /// Summary of the cohort's committed shapes.
-pub async fn measure_summary(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<MeasureSummary> {
+pub async fn measure_summary(pool: &super::Pool, cohort_id: i64) -> sqlx::Result<MeasureSummary> {
     sqlx::query_as(
         "select count(*) as n, avg(area_mm2) as area_mean, min(area_mm2) as area_min,
              max(area_mm2) as area_max, avg(volume_mm3) as volume_mean,
              min(volume_mm3) as volume_min, max(volume_mm3) as volume_max
-         from shape where cohort_id = ?",
+         from shape where cohort_id = $1",
     )
     .bind(cohort_id)
     .fetch_one(pool)
@@ -325,7 +317,7 @@ pub struct ScienceRow {
     /// Index of that training shape.
     pub nearest_training_index: Option<i64>,
     /// Whether the cohort's min_novelty is met.
-    pub novelty_met: Option<bool>,
+    pub novelty_met: Option<super::Flag>,
     /// Draws rejected as too close to a training shape.
     pub redraws: i64,
     /// Anatomical measurements.
@@ -333,23 +325,34 @@ pub struct ScienceRow {
     /// Candidates drawn (targeted cohorts).
     pub candidates: Option<i64>,
     /// Whether the kept shape meets every target (targeted cohorts).
-    pub targets_met: Option<bool>,
+    pub targets_met: Option<super::Flag>,
 }
 
 /// Novelty and anatomy of a cohort's shapes in index order.
-pub async fn cohort_science(pool: &SqlitePool, cohort_id: i64) -> sqlx::Result<Vec<ScienceRow>> {
+pub async fn cohort_science(pool: &super::Pool, cohort_id: i64) -> sqlx::Result<Vec<ScienceRow>> {
     sqlx::query_as(
         "select shape_id, novelty_cd, nearest_training_index, novelty_met, redraws, anatomy,
              candidates, targets_met
-         from shape where cohort_id = ? order by shape_index",
+         from shape where cohort_id = $1 order by shape_index",
     )
     .bind(cohort_id)
     .fetch_all(pool)
     .await
 }
 
+/// Shapes stored for a cohort.
+pub async fn count_for_cohort<'e>(
+    ex: impl super::Executor<'e>,
+    cohort_id: i64,
+) -> sqlx::Result<i64> {
+    sqlx::query_scalar("select count(*) from shape where cohort_id = $1")
+        .bind(cohort_id)
+        .fetch_one(ex)
+        .await
+}
+
 /// Total shapes stored (for /metrics).
-pub async fn count_all(pool: &SqlitePool) -> sqlx::Result<i64> {
+pub async fn count_all(pool: &super::Pool) -> sqlx::Result<i64> {
     sqlx::query_scalar("select count(*) from shape")
         .fetch_one(pool)
         .await

@@ -2,8 +2,6 @@
 //! labelled surface with its summary), or why none could be made, kept so the pipeline
 //! runs once per shape and options.
 
-use sqlx::SqlitePool;
-
 /// What the pipeline gave for one shape and set of options.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SimulationOutcome {
@@ -75,14 +73,14 @@ impl RawRow {
 
 /// The stored outcome for a shape and options, whatever it was made from.
 pub async fn get(
-    pool: &SqlitePool,
+    pool: &super::Pool,
     shape_id: i64,
     options: &str,
 ) -> sqlx::Result<Option<SimulationRow>> {
     let raw: Option<RawRow> = sqlx::query_as(
         "select mesh, face_ids, summary, error, error_field, mesh_sha256, software_version,
              seconds
-         from shape_simulation where shape_id = ? and options = ?",
+         from shape_simulation where shape_id = $1 and options = $2",
     )
     .bind(shape_id)
     .bind(options)
@@ -93,7 +91,7 @@ pub async fn get(
 
 /// Stores (or replaces) the outcome for a shape and options.
 pub async fn put(
-    pool: &SqlitePool,
+    pool: &super::Pool,
     shape_id: i64,
     options: &str,
     row: &SimulationRow,
@@ -109,7 +107,7 @@ pub async fn put(
     sqlx::query(
         "insert into shape_simulation (shape_id, options, mesh_sha256, software_version, mesh,
              face_ids, summary, error, error_field, seconds)
-         values (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)
+         values ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)
          on conflict (shape_id, options) do update set mesh_sha256 = excluded.mesh_sha256,
              software_version = excluded.software_version, mesh = excluded.mesh,
              face_ids = excluded.face_ids, summary = excluded.summary, error = excluded.error,
@@ -132,7 +130,7 @@ pub async fn put(
 }
 
 /// Rows stored (for /metrics and tests).
-pub async fn count(pool: &SqlitePool) -> sqlx::Result<i64> {
+pub async fn count(pool: &super::Pool) -> sqlx::Result<i64> {
     sqlx::query_scalar("select count(*) from shape_simulation")
         .fetch_one(pool)
         .await

@@ -2,34 +2,37 @@
 //! schema), as enums read and written through sqlx, so no handler compares strings.
 
 use serde::{Deserialize, Serialize};
+use sqlx::any::{Any, AnyTypeInfo};
 use sqlx::encode::IsNull;
 use sqlx::error::BoxDynError;
-use sqlx::sqlite::{SqliteArgumentsBuffer, SqliteTypeInfo, SqliteValueRef};
-use sqlx::{Decode, Encode, Sqlite, Type};
+use sqlx::{Database, Decode, Encode, Type};
 
 use crate::cohort::{Selection, Weighting};
 
 /// Implements sqlx's TEXT mapping for an enum with `as_str` and `parse`.
 macro_rules! text_column {
     ($($t:ty),* $(,)?) => {$(
-        impl Type<Sqlite> for $t {
-            fn type_info() -> SqliteTypeInfo {
-                <&str as Type<Sqlite>>::type_info()
+        impl Type<Any> for $t {
+            fn type_info() -> AnyTypeInfo {
+                <&str as Type<Any>>::type_info()
             }
-            fn compatible(ty: &SqliteTypeInfo) -> bool {
-                <&str as Type<Sqlite>>::compatible(ty)
-            }
-        }
-
-        impl Encode<'_, Sqlite> for $t {
-            fn encode_by_ref(&self, buf: &mut SqliteArgumentsBuffer) -> Result<IsNull, BoxDynError> {
-                <&str as Encode<'_, Sqlite>>::encode(self.as_str(), buf)
+            fn compatible(ty: &AnyTypeInfo) -> bool {
+                <&str as Type<Any>>::compatible(ty)
             }
         }
 
-        impl<'r> Decode<'r, Sqlite> for $t {
-            fn decode(value: SqliteValueRef<'r>) -> Result<Self, BoxDynError> {
-                let text = <&str as Decode<'r, Sqlite>>::decode(value)?;
+        impl Encode<'_, Any> for $t {
+            fn encode_by_ref(
+                &self,
+                buf: &mut <Any as Database>::ArgumentBuffer,
+            ) -> Result<IsNull, BoxDynError> {
+                <&str as Encode<'_, Any>>::encode(self.as_str(), buf)
+            }
+        }
+
+        impl<'r> Decode<'r, Any> for $t {
+            fn decode(value: <Any as Database>::ValueRef<'r>) -> Result<Self, BoxDynError> {
+                let text = <&str as Decode<'r, Any>>::decode(value)?;
                 <$t>::parse(text).ok_or_else(|| {
                     format!("{text:?} is not a valid {}", stringify!($t)).into()
                 })
@@ -105,6 +108,40 @@ column_enum! {
 }
 
 column_enum! {
+    /// What a task (a unit of a job one worker runs under a lease) makes.
+    TaskKind {
+        /// One training shape reconstructed at a cohort's resolution (novelty reference).
+        Surface = "surface",
+        /// The model's training shapes measured (targeted cohorts).
+        Anatomy = "anatomy",
+        /// One generated shape of a cohort.
+        Shape = "shape",
+        /// A cohort's pairwise statistics, after its last shape.
+        Metrics = "metrics",
+        /// A whole training.
+        Training = "training",
+        /// A whole fit.
+        Fit = "fit",
+    }
+}
+
+column_enum! {
+    /// Where a task stands.
+    TaskStatus {
+        /// Waiting for a worker.
+        Queued = "queued",
+        /// Held by a worker's lease.
+        Running = "running",
+        /// Its result is committed.
+        Done = "done",
+        /// Gave up; its job failed with it.
+        Failed = "failed",
+        /// Its job was cancelled or failed before it finished.
+        Cancelled = "cancelled",
+    }
+}
+
+column_enum! {
     /// Where a model stands.
     ModelStatus {
         /// Its training job runs.
@@ -138,6 +175,8 @@ impl JobStatus {
 text_column!(
     JobKind,
     JobStatus,
+    TaskKind,
+    TaskStatus,
     ModelStatus,
     AnchorStatus,
     Weighting,

@@ -214,9 +214,26 @@ pub trait Engine: Send + Sync + 'static {
         cancel: &AtomicBool,
     ) -> anyhow::Result<TriMesh>;
 
-    /// The novelty reference over `surfaces`, the training surfaces in index order, sampled
-    /// exactly as [`Engine::novelty_reference`] samples them.
-    fn novelty_reference_from(&self, surfaces: &[TriMesh]) -> anyhow::Result<NoveltyReference>;
+    /// The novelty reference of the model at `resolution` if this engine already holds it
+    /// (built by [`Engine::novelty_reference`] or [`Engine::novelty_reference_from`]), so a
+    /// caller with stored surfaces need not read and sample them again.
+    fn cached_novelty_reference(
+        &self,
+        _model_dir: &Path,
+        _resolution: usize,
+    ) -> Option<Arc<NoveltyReference>> {
+        None
+    }
+
+    /// The novelty reference of the model at `resolution` over `surfaces`, its training
+    /// surfaces in index order, sampled exactly as [`Engine::novelty_reference`] samples
+    /// them; an engine with a cache keeps it as that model's and resolution's reference.
+    fn novelty_reference_from(
+        &self,
+        model_dir: &Path,
+        resolution: usize,
+        surfaces: &[TriMesh],
+    ) -> anyhow::Result<Arc<NoveltyReference>>;
 
     /// Pairwise Chamfer distance matrix (unit-ball coordinates) over a cohort's meshes.
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>>;
@@ -304,7 +321,12 @@ impl Engine for UnavailableEngine {
         self.refuse()
     }
 
-    fn novelty_reference_from(&self, _: &[TriMesh]) -> anyhow::Result<NoveltyReference> {
+    fn novelty_reference_from(
+        &self,
+        _: &Path,
+        _: usize,
+        _: &[TriMesh],
+    ) -> anyhow::Result<Arc<NoveltyReference>> {
         self.refuse()
     }
 

@@ -226,8 +226,27 @@ impl Engine for SdfEngine {
         )?)
     }
 
-    fn novelty_reference_from(&self, surfaces: &[TriMesh]) -> anyhow::Result<NoveltyReference> {
-        Ok(NoveltyReference::new(surfaces, self.chamfer_points)?)
+    fn cached_novelty_reference(
+        &self,
+        model_dir: &Path,
+        resolution: usize,
+    ) -> Option<Arc<NoveltyReference>> {
+        let key = (model_dir.to_path_buf(), resolution);
+        self.references.lock().ok()?.get(&key).cloned()
+    }
+
+    fn novelty_reference_from(
+        &self,
+        model_dir: &Path,
+        resolution: usize,
+        surfaces: &[TriMesh],
+    ) -> anyhow::Result<Arc<NoveltyReference>> {
+        let reference = Arc::new(NoveltyReference::new(surfaces, self.chamfer_points)?);
+        self.references
+            .lock()
+            .map_err(|_| anyhow::anyhow!("reference cache poisoned"))?
+            .insert((model_dir.to_path_buf(), resolution), reference.clone());
+        Ok(reference)
     }
 
     fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>> {
@@ -408,4 +427,30 @@ fn read_reconstruction_cds(model_dir: &Path) -> Vec<Option<f64>> {
 pub fn read_evaluation(model_dir: &Path) -> Option<EvaluationReport> {
     let bytes = std::fs::read(model_dir.join(EVALUATION_FILE)).ok()?;
     serde_json::from_slice(&bytes).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::test_shapes::uv_sphere;
+
+    #[test]
+    fn a_reference_built_from_stored_surfaces_is_kept_for_its_model_and_resolution() {
+        let engine = SdfEngine::new(Backend::default()).with_chamfer_points(200);
+        let dir = Path::new("models/some-model");
+        assert!(engine.cached_novelty_reference(dir, 64).is_none());
+        let surfaces = [
+            uv_sphere(1.0, [0.0; 3], 8, 12),
+            uv_sphere(0.5, [0.1, 0.0, 0.0], 8, 12),
+        ];
+        let built = engine.novelty_reference_from(dir, 64, &surfaces).unwrap();
+        let cached = engine.cached_novelty_reference(dir, 64).unwrap();
+        assert!(Arc::ptr_eq(&built, &cached));
+        assert!(engine.cached_novelty_reference(dir, 128).is_none());
+        assert!(
+            engine
+                .cached_novelty_reference(Path::new("models/other"), 64)
+                .is_none()
+        );
+    }
 }

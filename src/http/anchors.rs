@@ -239,6 +239,7 @@ async fn fit_model(
     // Stored under the format validation read it as: no path from the client reaches the disk.
     let path = state
         .config
+        .storage
         .models_dir
         .join("fits")
         .join(format!("anchor-{anchor_id}.{ext}"));
@@ -520,11 +521,7 @@ fn check_name(name: &str) -> Result<()> {
 }
 
 /// The file's stem (restricted to the name alphabet), with `-2`, `-3`… when taken.
-async fn free_name(
-    conn: &mut sqlx::SqliteConnection,
-    model_id: &str,
-    file_name: &str,
-) -> Result<String> {
+async fn free_name(conn: &mut db::Conn, model_id: &str, file_name: &str) -> Result<String> {
     let stem = std::path::Path::new(file_name)
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

@@ -18,7 +18,6 @@ use std::time::{Duration, Instant};
 use axum::extract::State;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use futures_util::stream::{self, Stream};
-use sqlx::SqlitePool;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
@@ -73,7 +72,7 @@ impl Fingerprint {
             status: change.job.status,
             done: change.job.progress_done,
             total: change.job.progress_total,
-            cancel_requested: change.job.cancel_requested,
+            cancel_requested: change.job.cancel_requested.0,
             updated_at: change.updated_at.clone(),
         }
     }
@@ -81,7 +80,7 @@ impl Fingerprint {
 
 /// One subscriber's position in the table and the events it has yet to send.
 struct JobFeed {
-    pool: SqlitePool,
+    pool: crate::db::Pool,
     controls: JobControls,
     started: Instant,
     /// None until the first look; then the latest change seen.
@@ -92,7 +91,7 @@ struct JobFeed {
 }
 
 impl JobFeed {
-    fn new(pool: SqlitePool, controls: JobControls) -> Self {
+    fn new(pool: crate::db::Pool, controls: JobControls) -> Self {
         Self {
             pool,
             controls,

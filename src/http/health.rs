@@ -5,7 +5,6 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use axum::Json;
 use axum::extract::State;
 use serde::Serialize;
-use sqlx::SqlitePool;
 use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
@@ -61,7 +60,11 @@ pub struct ReadinessProbe {
 impl ReadinessProbe {
     /// Whether the database takes a write; the error says why not. `on_write` runs once per
     /// write actually made.
-    pub async fn check(&self, pool: &SqlitePool, on_write: impl FnOnce()) -> Result<(), String> {
+    pub async fn check(
+        &self,
+        pool: &crate::db::Pool,
+        on_write: impl FnOnce(),
+    ) -> Result<(), String> {
         let arrived_after = self.started.load(Ordering::SeqCst);
         let mut last = self.last.lock().await;
         if let Some((probe, outcome)) = last.as_ref()

@@ -11,11 +11,8 @@ use super::AppState;
 use super::error::{ApiError, Problem, Result};
 use super::extractors::parse_id;
 use crate::db::states::{JobKind, JobStatus};
-use crate::db::{
-    self,
-    jobs::{CancelOutcome, JobRow},
-};
-use crate::jobs::{self, Job};
+use crate::db::{self, jobs::JobRow};
+use crate::jobs::{self, CancelOutcome, Job};
 
 /// A job as the API shows it.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
@@ -70,7 +67,7 @@ impl From<JobRow> for JobView {
                 total: j.progress_total,
             },
             attempts: j.attempts,
-            cancel_requested: j.cancel_requested,
+            cancel_requested: j.cancel_requested.0,
             created_at: j.created_at,
             started_at: j.started_at,
             finished_at: j.finished_at,
@@ -127,21 +124,9 @@ async fn cancel_job(
     Ok((StatusCode::ACCEPTED, Json(JobView::from(job))))
 }
 
-/// Asks a job to stop: a queued one is cancelled at once, a running one is flagged and its
-/// worker interrupted (it stops at its next check).
+/// Asks a job to stop: one no worker holds is cancelled at once; one being worked on is
+/// flagged, its tasks in this process interrupted now and those elsewhere at their next
+/// lease renewal.
 pub(super) async fn stop_job(state: &AppState, job_id: i64) -> Result<CancelOutcome> {
-    let outcome = db::jobs::request_cancel(&state.pool, job_id).await?;
-    match outcome {
-        CancelOutcome::Requested => {
-            state.jobs.controls.interrupt(job_id);
-        }
-        CancelOutcome::CancelledWhileQueued => {
-            if let Some(row) = db::jobs::get(&state.pool, job_id).await? {
-                let job = Job::parse(row.kind, &row.payload).map_err(anyhow::Error::from)?;
-                jobs::finish_cancelled_while_queued(&state.jobs, &job).await?;
-            }
-        }
-        CancelOutcome::AlreadyFinished => {}
-    }
-    Ok(outcome)
+    Ok(jobs::lifecycle::cancel(&state.jobs, job_id).await?)
 }

@@ -35,7 +35,6 @@ use axum::http::Uri;
 use axum::middleware::{self, Next};
 use axum::response::Response;
 use axum::{Extension, Router};
-use sqlx::SqlitePool;
 use tower_http::trace::TraceLayer;
 use utoipa_axum::router::OpenApiRouter;
 
@@ -51,7 +50,7 @@ use limits::Limits;
 #[derive(Clone)]
 pub struct AppState {
     /// The database.
-    pub pool: SqlitePool,
+    pub pool: crate::db::Pool,
     /// Settings.
     pub config: Arc<Config>,
     /// Engine, job controls and metrics, shared with the workers.

@@ -157,7 +157,7 @@ pub(super) async fn create_model(
     .await
     .map_err(anyhow::Error::from)??;
 
-    let model_dir = state.config.models_dir.join(&model_id);
+    let model_dir = state.config.storage.models_dir.join(&model_id);
     let input_dir = model_dir.join("input");
     let mut submission = state.queue.begin().await?;
     if db::models::get(&state.pool, &model_id).await?.is_some() {

@@ -21,7 +21,6 @@ use crate::cohort::{AnchorShare, ShapeProvenance};
 use crate::db::{self, shapes::ShapeRow};
 use crate::formats::mesh_blob;
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
-use crate::geometry::normalize::UnitBallTransform;
 use crate::simulation::MeshRequest;
 use crate::telemetry::spawn_blocking_with_span;
 
@@ -136,7 +135,7 @@ impl ShapeView {
                     selection: s.selection,
                     attempt: s.attempt,
                     candidates: s.candidates,
-                    targets_met: s.targets_met,
+                    targets_met: s.targets_met.map(bool::from),
                     sampler,
                 },
                 anchor_ids: s.anchor_ids.map(|a| a.0).unwrap_or_default(),
@@ -156,7 +155,7 @@ impl ShapeView {
             novelty_cd: s.novelty_cd,
             nearest_training_index: s.nearest_training_index,
             redraws: s.redraws,
-            novelty_met: s.novelty_met,
+            novelty_met: s.novelty_met.map(bool::from),
             anatomy: s.anatomy.map(|a| a.0),
             anatomy_error: s.anatomy_error,
             faces: None,
@@ -369,7 +368,10 @@ pub(super) async fn encode_mesh(
     units: &'static str,
 ) -> Result<Vec<u8>> {
     let shape_id = shape.shape_id;
-    let stored = db::shapes::get_mesh(&state.pool, shape_id)
+    let stored = state
+        .jobs
+        .objects
+        .shape_mesh(&state.pool, shape_id)
         .await?
         .ok_or_else(|| ApiError::not_found("shape", shape_id.to_string()))?;
     let view = ShapeView::from_row(shape);
@@ -381,10 +383,7 @@ pub(super) async fn encode_mesh(
     };
     let bytes = spawn_blocking_with_span(move || -> anyhow::Result<Vec<u8>> {
         let unit = mesh_blob::decode(&stored.mesh)?;
-        let transform = UnitBallTransform {
-            centre: [stored.centre_x, stored.centre_y, stored.centre_z],
-            radius: stored.radius,
-        };
+        let transform = stored.transform();
         let mesh = if units == "mm" {
             transform.mesh_to_mesh_units(&unit)
         } else {

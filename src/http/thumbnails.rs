@@ -83,7 +83,10 @@ async fn render_thumbnail(state: &AppState, shape_id: i64) -> Result<Vec<u8>> {
         .acquire()
         .await
         .map_err(anyhow::Error::from)?;
-    let stored = db::shapes::get_mesh(&state.pool, shape_id)
+    let stored = state
+        .jobs
+        .objects
+        .shape_mesh(&state.pool, shape_id)
         .await?
         .ok_or_else(|| ApiError::not_found("shape", shape_id.to_string()))?;
     let png = spawn_blocking_with_span(move || -> anyhow::Result<Vec<u8>> {

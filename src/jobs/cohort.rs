@@ -1,24 +1,25 @@
-//! The cohort job: the cohort pipeline ([`crate::cohort`]) generates the shapes not yet
-//! stored on an engine thread, this task commits each in its own transaction as it arrives,
-//! then the pairwise Chamfer metrics. Re-running it after an interruption continues where
-//! it stopped.
+//! The cohort job's tasks: setup steps (training surfaces for novelty, training
+//! measurements for targets), one task per shape drawn by the cohort pipeline
+//! ([`crate::cohort`]) and committed with its lease, then the pairwise Chamfer metrics.
+//! Any worker may run any of them; a cohort interrupted anywhere continues with the shapes
+//! not yet stored, and each shape is the same whichever worker draws it.
 
 use std::collections::HashSet;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
-use tokio::sync::{mpsc, oneshot};
 
 use super::priority::spawn_background;
-use super::{JobContext, JobError, join_error, setup, stats};
+use super::{
+    JobContext, JobError, TaskRun, join_error, lifecycle, setup, stats, stopped, stopped_or_failed,
+};
 use crate::cohort::{
     CohortError, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape,
     EngineHandle, ModelLatents,
 };
-use crate::db::{self, cohorts::CohortRow, models::ModelRow};
+use crate::db::tasks::NewTask;
+use crate::db::{self, cohorts::CohortRow, jobs::FinalStatus, models::ModelRow, states::TaskKind};
 use crate::engine::AnchorLatent;
 use crate::formats::mesh_blob;
 
@@ -29,75 +30,206 @@ pub struct CohortPayload {
     pub cohort_id: i64,
 }
 
-pub(super) async fn run(
-    ctx: &JobContext,
-    job_id: i64,
-    payload: &CohortPayload,
-    flag: &Arc<AtomicBool>,
-) -> Result<(), JobError> {
-    let cohort = db::cohorts::get(&ctx.pool, payload.cohort_id)
-        .await?
-        .with_context(|| format!("cohort {} no longer exists", payload.cohort_id))?;
-    tracing::Span::current().record("cohort_id", cohort.cohort_id);
-    let model = db::models::get(&ctx.pool, &cohort.model_id)
-        .await?
-        .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
+/// The tasks of a cohort job: the training surfaces its model lacks at the cohort's
+/// resolution, the training measurements when it has targets and they are not stored, one
+/// task per shape not yet stored, and the metrics step when every shape is stored.
+pub(super) async fn plan(pool: &db::Pool, payload: &CohortPayload) -> anyhow::Result<Vec<NewTask>> {
+    let (cohort, model) = load(pool, payload).await?;
     let request = cohort.request().context("the stored request")?;
-    let stored: HashSet<i64> = db::shapes::existing_indices(&ctx.pool, cohort.cohort_id)
+    let count = training_count(&model)?;
+    let stored_surfaces: HashSet<i64> =
+        db::novelty_surfaces::stored_indices(pool, &model.model_id, request.resolution)
+            .await?
+            .into_iter()
+            .collect();
+    let mut tasks: Vec<NewTask> = (0..count as i64)
+        .filter(|i| !stored_surfaces.contains(i))
+        .map(|item| NewTask {
+            kind: TaskKind::Surface,
+            item,
+        })
+        .collect();
+    if request.targets.is_some()
+        && setup::stored_training_anatomy(pool, &model.model_id, count)
+            .await?
+            .is_none()
+    {
+        tasks.push(NewTask::whole(TaskKind::Anatomy));
+    }
+    let stored: HashSet<i64> = db::shapes::existing_indices(pool, cohort.cohort_id)
         .await?
         .into_iter()
         .collect();
-    let missing: Vec<u64> = (0..cohort.count)
+    let missing: Vec<NewTask> = (0..cohort.count)
         .filter(|i| !stored.contains(i))
-        .map(|i| i as u64)
+        .map(|item| NewTask {
+            kind: TaskKind::Shape,
+            item,
+        })
         .collect();
-    if !missing.is_empty() {
-        if !stored.is_empty() {
-            tracing::info!(done = stored.len(), "resuming cohort");
-        }
-        let generation = Generation {
-            ctx,
-            job_id,
-            cohort: &cohort,
-            model: &model,
-            request,
-            flag,
-        };
-        generation.run(missing, stored.len() as i64).await?;
+    if missing.is_empty()
+        && db::cohort_metrics::get(pool, cohort.cohort_id)
+            .await?
+            .is_none()
+    {
+        tasks.push(NewTask::whole(TaskKind::Metrics));
     }
-    let has_metrics = db::cohort_metrics::get(&ctx.pool, cohort.cohort_id)
+    tasks.extend(missing);
+    Ok(tasks)
+}
+
+/// The cohort and its model, or an error naming the one that is gone.
+async fn load(pool: &db::Pool, payload: &CohortPayload) -> anyhow::Result<(CohortRow, ModelRow)> {
+    let cohort = db::cohorts::get(pool, payload.cohort_id)
         .await?
-        .is_some();
-    if !has_metrics {
-        compute_metrics(ctx, &cohort)
-            .await
-            .context("pairwise metrics")?;
+        .with_context(|| format!("cohort {} no longer exists", payload.cohort_id))?;
+    tracing::Span::current().record("cohort_id", cohort.cohort_id);
+    let model = db::models::get(pool, &cohort.model_id)
+        .await?
+        .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
+    Ok((cohort, model))
+}
+
+fn training_count(model: &ModelRow) -> anyhow::Result<usize> {
+    let info = model
+        .info()
+        .with_context(|| format!("model {:?} has no manifest", model.model_id))?;
+    Ok(info.training_shape_count())
+}
+
+/// Setup step: training shape `item` as the model reconstructs it at the cohort's
+/// resolution, stored for every later cohort of that model and resolution.
+pub(super) async fn surface(
+    ctx: &JobContext,
+    run: &TaskRun,
+    payload: &CohortPayload,
+) -> Result<(), JobError> {
+    let (cohort, model) = load(&ctx.pool, payload).await?;
+    let resolution = cohort.resolution as usize;
+    let index = usize::try_from(run.lease.item).context("a training-shape index")?;
+    let stored = db::novelty_surfaces::stored_indices(&ctx.pool, &model.model_id, resolution)
+        .await?
+        .contains(&run.lease.item);
+    let blob = if stored {
+        None
+    } else {
+        let (engine, dir, flag) = (
+            ctx.engine.clone(),
+            PathBuf::from(&model.dir_path),
+            run.flag.clone(),
+        );
+        let made = spawn_background(move || {
+            let mesh = engine.training_surface(&dir, index, resolution, &flag)?;
+            anyhow::Ok(mesh_blob::encode(&mesh))
+        })
+        .await
+        .map_err(join_error)?;
+        let made = made.map_err(|e| {
+            let e = e.context(format!("training shape {index} at resolution {resolution}"));
+            stopped_or_failed(&run.flag, e.context("novelty reference"))
+        })?;
+        Some(made)
+    };
+    let mut tx = db::begin_write(&ctx.pool).await?;
+    db::tasks::complete(&mut tx, &run.lease).await?;
+    if let Some(blob) = &blob {
+        let surface = db::novelty_surfaces::Surface {
+            model_id: &model.model_id,
+            resolution,
+            shape_index: index,
+            mesh: blob,
+        };
+        db::novelty_surfaces::store(&mut tx, run.lease.job_id, &surface).await?;
     }
+    tx.commit()
+        .await
+        .context("cannot commit a novelty surface")?;
+    tracing::debug!(index, resolution, "novelty surface stored");
     Ok(())
 }
 
-/// The generation of a cohort's missing shapes.
+/// Setup step of a targeted cohort: the model's training shapes measured and stored.
+pub(super) async fn anatomy(
+    ctx: &JobContext,
+    run: &TaskRun,
+    payload: &CohortPayload,
+) -> Result<(), JobError> {
+    let (_, model) = load(&ctx.pool, payload).await?;
+    let count = training_count(&model)?;
+    let dir = PathBuf::from(&model.dir_path);
+    setup::training_anatomy(&ctx.pool, ctx.engine.clone(), &model.model_id, &dir, count)
+        .await
+        .context("targets")?;
+    let mut tx = db::begin_write(&ctx.pool).await?;
+    db::tasks::complete(&mut tx, &run.lease).await?;
+    tx.commit()
+        .await
+        .context("cannot commit the training measurements")?;
+    Ok(())
+}
+
+/// One shape: drawn by the cohort's pipeline for its index (the same shape whichever worker
+/// makes it, and however often), committed with the task. The last shape's commit queues
+/// the metrics step.
+pub(super) async fn shape(
+    ctx: &JobContext,
+    run: &TaskRun,
+    payload: &CohortPayload,
+) -> Result<(), JobError> {
+    let (cohort, model) = load(&ctx.pool, payload).await?;
+    let index = u64::try_from(run.lease.item).context("a shape index")?;
+    let request = cohort.request().context("the stored request")?;
+    let generation = Generation {
+        ctx,
+        run,
+        cohort: &cohort,
+        model: &model,
+        request,
+    };
+    let generator = generation.generator().await?;
+    let made = spawn_background(move || -> Result<Encoded, CohortError> {
+        let shape = generator.shape(index)?;
+        let blob = mesh_blob::encode(&shape.shape.mesh_unit);
+        let sha = mesh_blob::sha256_hex(&blob);
+        Ok(Encoded { shape, blob, sha })
+    })
+    .await
+    .map_err(join_error)??;
+    generation.commit_shape(&made).await?;
+    ctx.metrics.inc_shapes_generated();
+    tracing::debug!(index, "shape committed");
+    Ok(())
+}
+
+/// The pairwise statistics of a finished cohort, committed with the task; the cohort's job
+/// succeeds with them.
+pub(super) async fn metrics(
+    ctx: &JobContext,
+    run: &TaskRun,
+    payload: &CohortPayload,
+) -> Result<(), JobError> {
+    let (cohort, _) = load(&ctx.pool, payload).await?;
+    stopped(&run.flag)?;
+    let (matrix, summary) = compute_metrics(ctx, &cohort)
+        .await
+        .context("pairwise metrics")?;
+    let mut tx = db::begin_write(&ctx.pool).await?;
+    db::tasks::complete(&mut tx, &run.lease).await?;
+    db::cohort_metrics::upsert(&mut *tx, cohort.cohort_id, &matrix, &summary).await?;
+    lifecycle::finish_job(&mut tx, run.lease.job_id, FinalStatus::Succeeded, None).await?;
+    tx.commit()
+        .await
+        .context("cannot commit the cohort's metrics")?;
+    Ok(())
+}
+
+/// The generation of one shape of a cohort.
 struct Generation<'a> {
     ctx: &'a JobContext,
-    job_id: i64,
+    run: &'a TaskRun,
     cohort: &'a CohortRow,
     model: &'a ModelRow,
     request: CohortRequest<i64>,
-    flag: &'a Arc<AtomicBool>,
-}
-
-/// Why the engine thread stopped generating.
-enum GenerationStop {
-    /// The pipeline stopped.
-    Cohort(CohortError),
-    /// This task stopped taking shapes (its commit failed).
-    Abandoned,
-}
-
-impl From<CohortError> for GenerationStop {
-    fn from(e: CohortError) -> Self {
-        Self::Cohort(e)
-    }
 }
 
 /// A finished shape with its canonical encoding.
@@ -108,73 +240,12 @@ struct Encoded {
 }
 
 impl Generation<'_> {
-    /// Generates `missing` on an engine thread and commits each shape as it arrives; the
-    /// next shape is generated only once the last one is stored. `done` shapes are stored
-    /// already.
-    async fn run(self, missing: Vec<u64>, mut done: i64) -> Result<(), JobError> {
-        let generator = self.generator().await?;
-        let (sender, mut shapes) = mpsc::channel::<(Encoded, oneshot::Sender<()>)>(1);
-        let task = spawn_background(move || {
-            generator.run(missing, |shape| {
-                let blob = mesh_blob::encode(&shape.shape.mesh_unit);
-                let sha = mesh_blob::sha256_hex(&blob);
-                let (stored, committed) = oneshot::channel();
-                sender
-                    .blocking_send((Encoded { shape, blob, sha }, stored))
-                    .map_err(|_| GenerationStop::Abandoned)?;
-                committed
-                    .blocking_recv()
-                    .map_err(|_| GenerationStop::Abandoned)
-            })
-        });
-        let mut commit_error = None;
-        while let Some((encoded, stored)) = shapes.recv().await {
-            done += 1;
-            let committed = self.commit_shape(&encoded, done).await;
-            let cancel = match committed {
-                Ok(()) => db::jobs::is_cancel_requested(&self.ctx.pool, self.job_id)
-                    .await
-                    .map_err(anyhow::Error::from),
-                Err(e) => Err(e),
-            };
-            match cancel {
-                Ok(cancel) => {
-                    self.ctx.metrics.inc_shapes_generated();
-                    tracing::debug!(index = encoded.shape.index, done, "shape committed");
-                    if cancel {
-                        self.flag.store(true, Ordering::SeqCst);
-                    }
-                    let _ = stored.send(());
-                }
-                Err(e) => {
-                    self.flag.store(true, Ordering::SeqCst);
-                    commit_error = Some(e);
-                    break;
-                }
-            }
-        }
-        drop(shapes);
-        let generated = task.await.map_err(join_error)?;
-        if let Some(e) = commit_error {
-            return Err(JobError::Failed(e.context("cannot store a shape")));
-        }
-        match generated {
-            Ok(()) => Ok(()),
-            Err(GenerationStop::Cohort(e)) => Err(e.into()),
-            Err(GenerationStop::Abandoned) => Err(JobError::Stopped),
-        }
-    }
-
     /// The pipeline of this cohort: anchors, training measurements and latents read, the
     /// novelty reference built from the training surfaces stored for the model and
-    /// resolution (the missing ones computed and stored first).
+    /// resolution by the cohort's setup steps.
     async fn generator(&self) -> Result<CohortGenerator, JobError> {
         let ctx = self.ctx;
-        let info = self
-            .model
-            .info()
-            .with_context(|| format!("model {:?} has no manifest", self.model.model_id))?;
-        let count = info.training_shape_count();
+        let count = training_count(self.model)?;
         let model_dir = PathBuf::from(&self.model.dir_path);
         let anchors = anchor_latents(&ctx.pool, &self.request.anchors)
             .await
@@ -182,32 +253,25 @@ impl Generation<'_> {
         let training = match &self.request.targets {
             None => None,
             Some(_) => Some(
-                setup::training_anatomy(
-                    &ctx.pool,
-                    ctx.engine.clone(),
-                    &self.model.model_id,
-                    &model_dir,
-                    count,
-                )
-                .await
-                .context("targets")?,
+                setup::stored_training_anatomy(&ctx.pool, &self.model.model_id, count)
+                    .await?
+                    .context("the training shapes are not measured")?,
             ),
         };
         let source = setup::ReferenceSource {
-            job_id: self.job_id,
             model_id: &self.model.model_id,
             model_dir: &model_dir,
             count,
             resolution: self.request.resolution,
         };
-        let reference = setup::novelty_reference(ctx, &source, self.flag).await?;
+        let reference = setup::novelty_reference(ctx, &source).await?;
         let engine = ctx.engine.clone();
-        let (request, flag) = (self.request.clone(), self.flag.clone());
+        let request = self.request.clone();
         let handle = EngineHandle {
             engine: engine.clone(),
             model_dir: model_dir.clone(),
             model_id: self.model.model_id.clone(),
-            cancel: flag.clone(),
+            cancel: self.run.flag.clone(),
         };
         let built = spawn_background(move || -> Result<CohortGenerator, JobError> {
             let latents = ModelLatents::read(&*engine, &model_dir, &request, count)?;
@@ -221,8 +285,10 @@ impl Generation<'_> {
         built.await.map_err(join_error)?
     }
 
-    /// Stores one shape and the job's progress in a single transaction.
-    async fn commit_shape(&self, encoded: &Encoded, done: i64) -> anyhow::Result<()> {
+    /// Stores one shape with its task's result and the job's progress in a single
+    /// transaction, refused when the task's lease was taken over; queues the metrics step
+    /// after the last shape.
+    async fn commit_shape(&self, encoded: &Encoded) -> Result<(), JobError> {
         let CohortShape {
             index,
             spec,
@@ -248,7 +314,6 @@ impl Generation<'_> {
             volume_mm3: shape.volume_mm3,
             centre: shape.transform.centre,
             radius: shape.transform.radius,
-            mesh: &encoded.blob,
             mesh_sha256: &encoded.sha,
             latent_noise: spec.latent_noise,
             selection: provenance.selection,
@@ -262,21 +327,30 @@ impl Generation<'_> {
             candidates: provenance.candidates,
             targets_met: provenance.targets_met,
         };
-        let mut tx = self.ctx.pool.begin_with(db::BEGIN_WRITE).await?;
+        let job_id = self.run.lease.job_id;
+        // The object first: a row never names a mesh that is not stored.
+        self.ctx.objects.put(&encoded.blob).await?;
+        let mut tx = db::begin_write(&self.ctx.pool).await?;
+        db::tasks::complete(&mut tx, &self.run.lease).await?;
         let shape_id = db::shapes::insert(&mut tx, &row)
             .await
             .with_context(|| format!("cannot store shape {index}"))?;
         if !self.request.anchors.is_empty() {
             db::anchors::set_shape_anchors(&mut tx, shape_id, &self.request.anchors).await?;
         }
-        db::jobs::set_progress(&mut tx, self.job_id, done).await?;
+        let done = db::shapes::count_for_cohort(&mut *tx, self.cohort.cohort_id).await?;
+        db::jobs::set_progress(&mut tx, job_id, done).await?;
+        if db::tasks::unfinished_count(&mut tx, job_id, TaskKind::Shape).await? == 0 {
+            db::tasks::insert_missing(&mut tx, job_id, &[NewTask::whole(TaskKind::Metrics)])
+                .await?;
+        }
         tx.commit().await.context("cannot commit shape")?;
         Ok(())
     }
 }
 
 /// The latents of a cohort's anchors, in the listed order; an error names a missing one.
-async fn anchor_latents(pool: &sqlx::SqlitePool, ids: &[i64]) -> anyhow::Result<Vec<AnchorLatent>> {
+async fn anchor_latents(pool: &db::Pool, ids: &[i64]) -> anyhow::Result<Vec<AnchorLatent>> {
     let mut out = Vec::with_capacity(ids.len());
     for &id in ids {
         let row = db::anchors::get(pool, id)
@@ -294,15 +368,24 @@ async fn anchor_latents(pool: &sqlx::SqlitePool, ids: &[i64]) -> anyhow::Result<
     Ok(out)
 }
 
-/// Pairwise Chamfer distances over the stored unit-ball meshes, summarised and stored.
-async fn compute_metrics(ctx: &JobContext, cohort: &CohortRow) -> anyhow::Result<()> {
-    let stored = db::shapes::cohort_meshes(&ctx.pool, cohort.cohort_id).await?;
+/// Pairwise Chamfer distances over the stored unit-ball meshes, and their summary.
+async fn compute_metrics(
+    ctx: &JobContext,
+    cohort: &CohortRow,
+) -> anyhow::Result<(Vec<Vec<f64>>, serde_json::Value)> {
+    let rows = db::shapes::cohort_meshes(&ctx.pool, cohort.cohort_id).await?;
+    let mut stored = Vec::with_capacity(rows.len());
+    for row in rows {
+        stored.push(ctx.objects.load(row).await?);
+    }
     let engine = ctx.engine.clone();
     let seed = cohort.seed as u64;
     let matrix = spawn_background(move || -> anyhow::Result<Vec<Vec<f64>>> {
         let meshes = stored
             .iter()
-            .map(|s| mesh_blob::decode(&s.mesh).with_context(|| format!("shape {}", s.shape_id)))
+            .map(|s| {
+                mesh_blob::decode(&s.mesh).with_context(|| format!("shape {}", s.row.shape_id))
+            })
             .collect::<anyhow::Result<Vec<_>>>()?;
         let matrix = engine.pairwise_chamfer(&meshes, seed)?;
         let n = meshes.len();
@@ -319,6 +402,5 @@ async fn compute_metrics(ctx: &JobContext, cohort: &CohortRow) -> anyhow::Result
     .await
     .map_err(join_error)??;
     let summary = serde_json::to_value(stats::summarize(&matrix))?;
-    db::cohort_metrics::upsert(&ctx.pool, cohort.cohort_id, &matrix, &summary).await?;
-    Ok(())
+    Ok((matrix, summary))
 }

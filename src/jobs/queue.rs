@@ -1,10 +1,10 @@
 //! The one way into the job queue: a [`Submission`] opens the write transaction in which a
 //! job and the row it works on are created together, refuses the job when the queue is full,
-//! stores its typed payload, and wakes a worker once it commits.
+//! stores its typed payload, and once it commits plans the job into tasks and wakes a
+//! worker.
 
 use std::sync::Arc;
 
-use sqlx::{Sqlite, SqliteConnection, SqlitePool, Transaction};
 use tokio::sync::Notify;
 
 use super::Job;
@@ -13,7 +13,7 @@ use crate::db;
 /// The queue's bound and the workers' wake-up signal.
 #[derive(Clone)]
 pub struct JobQueue {
-    pool: SqlitePool,
+    pool: db::Pool,
     wake: Arc<Notify>,
     max_pending: i64,
     retry_after_secs: u64,
@@ -38,7 +38,7 @@ pub enum SubmitError {
 impl JobQueue {
     /// A queue on `pool` holding at most `max_pending` queued or running jobs; a refusal
     /// advises retrying after `retry_after_secs`.
-    pub fn new(pool: SqlitePool, max_pending: i64, retry_after_secs: u64) -> Self {
+    pub fn new(pool: db::Pool, max_pending: i64, retry_after_secs: u64) -> Self {
         Self {
             pool,
             wake: Arc::new(Notify::new()),
@@ -55,21 +55,23 @@ impl JobQueue {
     /// Opens the write transaction of a submission.
     pub async fn begin(&self) -> sqlx::Result<Submission> {
         Ok(Submission {
-            tx: self.pool.begin_with(db::BEGIN_WRITE).await?,
+            tx: db::begin_write(&self.pool).await?,
             queue: self.clone(),
+            jobs: Vec::new(),
         })
     }
 }
 
 /// A write transaction that may enqueue jobs; they reach the workers when it commits.
 pub struct Submission {
-    tx: Transaction<'static, Sqlite>,
+    tx: db::Tx,
     queue: JobQueue,
+    jobs: Vec<i64>,
 }
 
 impl Submission {
     /// The transaction, for the rows the job works on.
-    pub fn conn(&mut self) -> &mut SqliteConnection {
+    pub fn conn(&mut self) -> &mut db::Conn {
         &mut self.tx
     }
 
@@ -85,6 +87,7 @@ impl Submission {
         }
         let payload = job.payload_json();
         let id = db::jobs::enqueue(&mut self.tx, job.kind(), &payload, progress_total).await?;
+        self.jobs.push(id);
         Ok(id)
     }
 
@@ -95,6 +98,8 @@ impl Submission {
         if !db::jobs::requeue_finished(&mut self.tx, job_id).await? {
             return Ok(false);
         }
+        db::tasks::requeue_ended(&mut self.tx, job_id).await?;
+        self.jobs.push(job_id);
         // The job counts itself now.
         let pending = db::jobs::count_pending(&mut *self.tx).await? - 1;
         if pending >= self.queue.max_pending {
@@ -107,9 +112,15 @@ impl Submission {
         Ok(true)
     }
 
-    /// Commits the transaction and wakes an idle worker.
+    /// Commits the transaction, plans its jobs into tasks and wakes an idle worker. A job
+    /// whose planning fails here is planned by the next worker that looks.
     pub async fn commit(self) -> sqlx::Result<()> {
         self.tx.commit().await?;
+        for job_id in self.jobs {
+            if let Err(e) = super::lifecycle::plan(&self.queue.pool, job_id).await {
+                tracing::warn!(job_id, error = format!("{e:#}"), "cannot plan the job yet");
+            }
+        }
         self.queue.wake.notify_one();
         Ok(())
     }

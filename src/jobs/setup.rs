@@ -7,10 +7,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use anyhow::Context;
-use sqlx::SqlitePool;
 
 use super::priority::spawn_background;
 use super::{JobContext, JobError, join_error};
@@ -20,15 +19,9 @@ use crate::engine::Engine;
 use crate::formats::mesh_blob;
 use crate::sdf::inference::novelty::NoveltyReference;
 
-/// One computation of novelty surfaces at a time: two jobs on one model and resolution
-/// share the surfaces the first one stores instead of computing them twice.
-static BUILDING_SURFACES: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
-
-/// Where a cohort job's novelty reference comes from.
+/// Where a cohort's novelty reference comes from.
 pub struct ReferenceSource<'a> {
-    /// The job computing it (its setup steps count the surfaces it stores).
-    pub job_id: i64,
-    /// The model's id and directory.
+    /// The model's id.
     pub model_id: &'a str,
     /// The model's directory.
     pub model_dir: &'a Path,
@@ -38,65 +31,48 @@ pub struct ReferenceSource<'a> {
     pub resolution: usize,
 }
 
-/// The novelty reference of a model at a resolution: the training surfaces stored in the
-/// database, the missing ones reconstructed off the executor and each stored as soon as it
-/// is made, then sampled and indexed by the engine.
+/// The novelty reference of a model at a resolution: the engine's own when it holds it,
+/// else built from the training surfaces the cohort's setup steps stored (off the executor)
+/// and kept by the engine.
 pub async fn novelty_reference(
     ctx: &JobContext,
     source: &ReferenceSource<'_>,
-    cancel: &Arc<AtomicBool>,
 ) -> Result<Arc<NoveltyReference>, JobError> {
-    let _one_at_a_time = BUILDING_SURFACES.lock().await;
     let ReferenceSource {
-        job_id,
         model_id,
         model_dir,
         count,
         resolution,
     } = *source;
-    let mut blobs: BTreeMap<usize, Vec<u8>> =
+    if let Some(reference) = ctx.engine.cached_novelty_reference(model_dir, resolution) {
+        return Ok(reference);
+    }
+    let blobs: BTreeMap<usize, Vec<u8>> =
         db::novelty_surfaces::stored(&ctx.pool, model_id, resolution)
             .await?
             .into_iter()
             .filter_map(|(i, blob)| Some((usize::try_from(i).ok()?, blob)))
             .filter(|(i, _)| *i < count)
             .collect();
-    for index in 0..count {
-        if blobs.contains_key(&index) {
-            continue;
-        }
-        let (engine, dir, flag) = (ctx.engine.clone(), model_dir.to_path_buf(), cancel.clone());
-        let made = spawn_background(move || {
-            let mesh = engine.training_surface(&dir, index, resolution, &flag)?;
-            anyhow::Ok(mesh_blob::encode(&mesh))
-        })
-        .await
-        .map_err(join_error)?;
-        let blob = match made {
-            Ok(blob) => blob,
-            Err(_) if cancel.load(Ordering::SeqCst) => return Err(JobError::Stopped),
-            Err(e) => {
-                let e = e.context(format!("training shape {index} at resolution {resolution}"));
-                return Err(JobError::Failed(e.context("novelty reference")));
-            }
-        };
-        db::novelty_surfaces::store(&ctx.pool, job_id, model_id, resolution, index, &blob).await?;
-        tracing::debug!(model_id, resolution, index, "novelty surface stored");
-        blobs.insert(index, blob);
+    if let Some(missing) = (0..count).find(|i| !blobs.contains_key(i)) {
+        let e = anyhow::anyhow!(
+            "training shape {missing} at resolution {resolution} is not stored (its setup step has not run)"
+        );
+        return Err(JobError::Failed(e.context("novelty reference")));
     }
-    let engine = ctx.engine.clone();
-    let reference = spawn_background(move || -> anyhow::Result<NoveltyReference> {
+    let (engine, dir) = (ctx.engine.clone(), model_dir.to_path_buf());
+    let reference = spawn_background(move || -> anyhow::Result<Arc<NoveltyReference>> {
         let surfaces = blobs
             .values()
             .map(|blob| mesh_blob::decode(blob))
             .collect::<Result<Vec<_>, _>>()
             .context("a stored novelty surface")?;
-        engine.novelty_reference_from(&surfaces)
+        engine.novelty_reference_from(&dir, resolution, &surfaces)
     })
     .await
     .map_err(join_error)?
     .context("novelty reference")?;
-    Ok(Arc::new(reference))
+    Ok(reference)
 }
 
 /// One measurement of training shapes at a time: a request and the job it queued (or two
@@ -105,7 +81,7 @@ static MEASURING: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 /// The model's stored training-shape measurements, when they cover all `count` shapes.
 pub async fn stored_training_anatomy(
-    pool: &SqlitePool,
+    pool: &db::Pool,
     model_id: &str,
     count: usize,
 ) -> anyhow::Result<Option<TrainingAnatomy>> {
@@ -117,7 +93,7 @@ pub async fn stored_training_anatomy(
 /// stored. The computation runs as its own task, so a caller that stops waiting for it
 /// (a request past its wait budget) still leaves the result stored for the next one.
 pub async fn training_anatomy(
-    pool: &SqlitePool,
+    pool: &db::Pool,
     engine: Arc<dyn Engine>,
     model_id: &str,
     model_dir: &Path,

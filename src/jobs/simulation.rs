@@ -13,7 +13,6 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-use sqlx::SqlitePool;
 use tokio::sync::{Semaphore, watch};
 
 use super::join_error;
@@ -21,7 +20,7 @@ use super::priority::spawn_background;
 use crate::db;
 use crate::db::simulations::{SimulationOutcome, SimulationRow};
 use crate::formats::mesh_blob;
-use crate::geometry::normalize::UnitBallTransform;
+use crate::objects::Objects;
 use crate::simulation::request::failure_field;
 use crate::simulation::{PreparedSimulation, SimulationRequest, Step, StoredSimulation};
 
@@ -75,15 +74,18 @@ type Answer = Option<Result<Prepared, String>>;
 
 /// The bounded, deduplicated, cached runs of one service.
 pub struct SimulationWork {
+    objects: Objects,
     slots: Arc<Semaphore>,
     backlog: usize,
     running: Arc<Mutex<HashMap<Key, watch::Receiver<Answer>>>>,
 }
 
 impl SimulationWork {
-    /// At most `slots` runs at once, and at most `backlog` started by requests.
-    pub fn new(slots: usize, backlog: usize) -> Self {
+    /// At most `slots` runs at once, and at most `backlog` started by requests; shapes'
+    /// meshes are read from `objects`.
+    pub fn new(slots: usize, backlog: usize, objects: Objects) -> Self {
         Self {
+            objects,
             slots: Arc::new(Semaphore::new(slots.max(1))),
             backlog: backlog.max(1),
             running: Arc::default(),
@@ -100,7 +102,7 @@ impl SimulationWork {
     /// same mesh, else made now (or joined, when a run is under way).
     pub async fn prepare(
         &self,
-        pool: &SqlitePool,
+        pool: &db::Pool,
         shape_id: i64,
         mesh_sha256: &str,
         request: &SimulationRequest,
@@ -124,7 +126,7 @@ impl SimulationWork {
 
     fn start_or_join(
         &self,
-        pool: &SqlitePool,
+        pool: &db::Pool,
         key: Key,
         request: &SimulationRequest,
         admission: Admission,
@@ -138,12 +140,12 @@ impl SimulationWork {
         }
         let (tx, rx) = watch::channel(None);
         running.insert(key.clone(), rx.clone());
-        let (pool, request) = (pool.clone(), request.clone());
+        let (pool, request, objects) = (pool.clone(), request.clone(), self.objects.clone());
         let (slots, map) = (self.slots.clone(), self.running.clone());
         // Detached: the run finishes and stores its result even when no one waits any more.
         tokio::spawn(async move {
             let result = match slots.acquire_owned().await {
-                Ok(_permit) => run(&pool, &key, &request).await,
+                Ok(_permit) => run(&pool, &objects, &key, &request).await,
                 Err(e) => Err(anyhow::Error::from(e)),
             };
             map.lock().unwrap_or_else(|e| e.into_inner()).remove(&key);
@@ -159,7 +161,7 @@ impl SimulationWork {
 
 /// A stored outcome made by this version from the shape's current mesh.
 async fn stored(
-    pool: &SqlitePool,
+    pool: &db::Pool,
     shape_id: i64,
     mesh_sha256: &str,
     options: &str,
@@ -189,12 +191,14 @@ async fn stored(
 
 /// Reads the shape, runs the pipeline in mm on a background thread, stores the outcome.
 async fn run(
-    pool: &SqlitePool,
+    pool: &db::Pool,
+    objects: &Objects,
     key: &Key,
     request: &SimulationRequest,
 ) -> anyhow::Result<Prepared> {
     let (shape_id, _, options) = key;
-    let stored = db::shapes::get_mesh(pool, *shape_id)
+    let stored = objects
+        .shape_mesh(pool, *shape_id)
         .await?
         .ok_or(PrepareError::NoShape(*shape_id))
         .map_err(anyhow::Error::from)?;
@@ -204,10 +208,7 @@ async fn run(
     let task = span.in_scope(|| {
         spawn_background(move || -> anyhow::Result<_> {
             let unit = mesh_blob::decode(&stored.mesh)?;
-            let transform = UnitBallTransform {
-                centre: [stored.centre_x, stored.centre_y, stored.centre_z],
-                radius: stored.radius,
-            };
+            let transform = stored.transform();
             let mm = transform.mesh_to_mesh_units(&unit);
             let mut kind = opts.kind;
             let result = crate::simulation::simulation_mesh_observed(&mm, &opts, &mut |step| {
@@ -219,7 +220,7 @@ async fn run(
             Ok((
                 result.map(PreparedSimulation::new),
                 kind,
-                stored.mesh_sha256,
+                stored.row.mesh_sha256,
             ))
         })
     });

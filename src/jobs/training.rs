@@ -1,14 +1,16 @@
-//! The training job: the engine trains a model from uploaded meshes; the model row turns
-//! `ready` with the engine's manifest, or `failed`.
+//! The training job, one task: the engine trains a model from uploaded meshes; the model
+//! row turns `ready` with the engine's manifest, or `failed` when the job ends otherwise
+//! ([`super::lifecycle::finish_job`]).
 
-use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
+use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
-use super::{JobContext, JobError, RunOutcome, run_with_progress, stopped, stopped_or_failed};
-use crate::db::{self, states::ModelStatus};
+use super::{
+    JobContext, JobError, TaskRun, lifecycle, run_with_progress, stopped, stopped_or_failed,
+};
+use crate::db::{self, jobs::FinalStatus, states::ModelStatus};
 use crate::engine::TrainingSpec;
 
 /// The payload of a `training` job.
@@ -22,42 +24,29 @@ pub struct TrainingPayload {
 
 pub(super) async fn run(
     ctx: &JobContext,
-    job_id: i64,
+    run: &TaskRun,
     payload: &TrainingPayload,
-    flag: &Arc<AtomicBool>,
 ) -> Result<(), JobError> {
     tracing::Span::current().record("model_id", payload.model_id.as_str());
-    stopped(flag)?;
+    stopped(&run.flag)?;
     let engine = ctx.engine.clone();
-    let (spec, task_flag) = (payload.spec.clone(), flag.clone());
-    // Saved epochs are the training job's progress: recovery after a killed process
-    // compares them with the progress at the claim to tell a slow job from a stuck one.
-    let trained = run_with_progress(ctx, job_id, PROGRESS_INTERVAL, move |saved| {
+    let (spec, task_flag) = (payload.spec.clone(), run.flag.clone());
+    // Saved epochs are the training's progress: lease renewals report them, so a training
+    // interrupted often but saving checkpoints is never given up as stuck.
+    let trained = run_with_progress(ctx, run, PROGRESS_INTERVAL, move |saved| {
         engine.train_model(&spec, &task_flag, saved)
     })
     .await?;
-    let info = trained.map_err(|e| stopped_or_failed(flag, e.context("training")))?;
-    db::models::set_trained(
-        &ctx.pool,
-        &payload.model_id,
-        ModelStatus::Ready,
-        Some(&info),
-    )
-    .await?;
+    let info = trained.map_err(|e| stopped_or_failed(&run.flag, e.context("training")))?;
+    let mut tx = db::begin_write(&ctx.pool).await?;
+    db::tasks::complete(&mut tx, &run.lease).await?;
+    db::models::set_trained(&mut *tx, &payload.model_id, ModelStatus::Ready, Some(&info)).await?;
+    lifecycle::finish_job(&mut tx, run.lease.job_id, FinalStatus::Succeeded, None).await?;
+    tx.commit()
+        .await
+        .context("cannot commit the trained model")?;
     Ok(())
 }
 
 /// How often the saved epochs of a running training are copied to the job row.
 const PROGRESS_INTERVAL: Duration = Duration::from_secs(1);
-
-/// Marks the model failed when its training ended without success.
-pub(super) async fn finish(
-    ctx: &JobContext,
-    payload: &TrainingPayload,
-    outcome: &RunOutcome,
-) -> anyhow::Result<()> {
-    if matches!(outcome, RunOutcome::Cancelled | RunOutcome::Failed(_)) {
-        db::models::set_trained(&ctx.pool, &payload.model_id, ModelStatus::Failed, None).await?;
-    }
-    Ok(())
-}

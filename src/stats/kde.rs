@@ -105,12 +105,7 @@ pub fn density(values: &[f64]) -> Result<Density, StatsError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn wave(n: usize, freq: f64, amp: f64, offset: f64) -> Vec<f64> {
-        (0..n)
-            .map(|i| offset + amp * (freq * (i + 1) as f64).sin())
-            .collect()
-    }
+    use crate::stats::test_support::wave;
 
     // R 4.2.2, printed by `Rscript tests/reference/kde.R`: `bw.nrd0(x)`, and `density(x)$y`
     // at grid points 1, 100, 256, 400 and 512, with the grid's ends, for

@@ -176,13 +176,7 @@ pub fn kolmogorov_sf(lambda: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The deterministic samples of `tests/reference/ks.py`: offset + amp·sin(freq·(i + 1)).
-    pub(crate) fn wave(n: usize, freq: f64, amp: f64, offset: f64) -> Vec<f64> {
-        (0..n)
-            .map(|i| offset + amp * (freq * (i + 1) as f64).sin())
-            .collect()
-    }
+    use crate::stats::test_support::wave;
 
     // `scipy.stats.ks_2samp(a, b)` (scipy 1.17.1), printed by `python tests/reference/ks.py`:
     // (n_a, freq_a, amp_a, offset_a, n_b, freq_b, amp_b, offset_b, D, p).

@@ -104,3 +104,15 @@ pub(crate) fn sorted(values: &[f64]) -> Vec<f64> {
     v.sort_by(f64::total_cmp);
     v
 }
+
+#[cfg(test)]
+pub(crate) mod test_support {
+    //! The deterministic samples the scipy references of `tests/reference/` are computed on.
+
+    /// `offset + amp·sin(freq·(i + 1))` for i in 0..n: the `wave` of the reference scripts.
+    pub(crate) fn wave(n: usize, freq: f64, amp: f64, offset: f64) -> Vec<f64> {
+        (0..n)
+            .map(|i| offset + amp * (freq * (i + 1) as f64).sin())
+            .collect()
+    }
+}

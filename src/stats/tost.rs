@@ -96,12 +96,7 @@ pub fn tost_welch_bounds(a: &[f64], b: &[f64], low: f64, high: f64) -> Result<To
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn wave(n: usize, freq: f64, amp: f64, offset: f64) -> Vec<f64> {
-        (0..n)
-            .map(|i| offset + amp * (freq * (i + 1) as f64).sin())
-            .collect()
-    }
+    use crate::stats::test_support::wave;
 
     // statsmodels 0.15.0 `ttost_ind(a, b, -m, m, usevar="unequal")` and
     // `CompareMeans(...).tconfint_diff(alpha=0.1, usevar="unequal")`, printed by

@@ -66,12 +66,7 @@ pub fn ecdf_area(a: &[f64], b: &[f64]) -> Result<f64, StatsError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn wave(n: usize, freq: f64, amp: f64, offset: f64) -> Vec<f64> {
-        (0..n)
-            .map(|i| offset + amp * (freq * (i + 1) as f64).sin())
-            .collect()
-    }
+    use crate::stats::test_support::wave;
 
     // `scipy.stats.wasserstein_distance(a, b)` on the samples of `tests/reference/ks.py`,
     // printed by `python tests/reference/wasserstein.py`:

@@ -218,8 +218,9 @@ fn check_database(path: &std::path::Path, cohorts: &[i64]) {
         assert_eq!(integrity, "ok");
         for cohort in cohorts {
             let rows: Vec<(i64, Vec<u8>, String)> = sqlx::query_as(
-                "select shape_index, mesh, mesh_sha256 from shape where cohort_id = ?
-                 order by shape_index",
+                "select s.shape_index, b.bytes, s.mesh_sha256 from shape s
+                 join blob b on b.sha256 = s.mesh_sha256
+                 where s.cohort_id = $1 order by s.shape_index",
             )
             .bind(cohort)
             .fetch_all(pool)

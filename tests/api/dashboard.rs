@@ -120,7 +120,7 @@ async fn a_thumbnail_is_rendered_once_and_then_served_from_the_cache() {
     assert_eq!(app.count("shape_thumbnail").await, 1);
 
     // What is cached is what is served: plant other bytes for the same mesh digest.
-    let sha: String = sqlx::query_scalar("select mesh_sha256 from shape where shape_id = ?")
+    let sha: String = sqlx::query_scalar("select mesh_sha256 from shape where shape_id = $1")
         .bind(shape)
         .fetch_one(&app.state.pool)
         .await

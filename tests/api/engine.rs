@@ -177,8 +177,13 @@ impl Engine for AnalyticEngine {
         ))
     }
 
-    fn novelty_reference_from(&self, surfaces: &[TriMesh]) -> anyhow::Result<NoveltyReference> {
-        Ok(NoveltyReference::new(surfaces, NOVELTY_POINTS)?)
+    fn novelty_reference_from(
+        &self,
+        _: &Path,
+        _: usize,
+        surfaces: &[TriMesh],
+    ) -> anyhow::Result<Arc<NoveltyReference>> {
+        Ok(Arc::new(NoveltyReference::new(surfaces, NOVELTY_POINTS)?))
     }
 
     fn pairwise_chamfer(&self, meshes: &[TriMesh], _: u64) -> anyhow::Result<Vec<Vec<f64>>> {

@@ -42,13 +42,13 @@ fn sigterm_mid_cohort_exits_cleanly_and_the_cohort_resumes() {
 
     let done_at_stop = crate::process::with_database(&dir.database(), async move |pool| {
         let (status, done): (String, i64) =
-            sqlx::query_as("select status, progress_done from job where job_id = ?")
+            sqlx::query_as("select status, progress_done from job where job_id = $1")
                 .bind(job)
                 .fetch_one(pool)
                 .await
                 .unwrap();
         assert_eq!(status, "queued", "the interrupted job is back in the queue");
-        let shapes: i64 = sqlx::query_scalar("select count(*) from shape where cohort_id = ?")
+        let shapes: i64 = sqlx::query_scalar("select count(*) from shape where cohort_id = $1")
             .bind(cohort)
             .fetch_one(pool)
             .await
@@ -113,7 +113,7 @@ fn sigterm_during_a_long_shape_exits_within_the_grace_period() {
         "the shape was abandoned:\n{log}"
     );
     let status = crate::process::with_database(&dir.database(), async move |pool| {
-        sqlx::query_scalar::<_, String>("select status from job where job_id = ?")
+        sqlx::query_scalar::<_, String>("select status from job where job_id = $1")
             .bind(job)
             .fetch_one(pool)
             .await

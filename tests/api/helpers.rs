@@ -88,17 +88,62 @@ pub async fn spawn_app() -> TestApp {
     spawn_app_with(AnalyticEngine::default()).await
 }
 
+/// The server the API tests also run against: `AORTAGEN_TEST_POSTGRES_URL`, a PostgreSQL
+/// URL whose user may create databases (`scripts/test` starts one). Unset: SQLite only.
+pub fn postgres_server() -> Option<String> {
+    std::env::var("AORTAGEN_TEST_POSTGRES_URL")
+        .ok()
+        .filter(|u| !u.is_empty())
+}
+
+/// A new, empty database for one test: a file in `dir` on SQLite, or a database of its own
+/// on the PostgreSQL test server when one is configured.
+pub async fn fresh_database_url(dir: &Path) -> String {
+    match postgres_server() {
+        None => format!("sqlite://{}", dir.join("aortagen.db").display()),
+        Some(server) => create_postgres_database(&server).await,
+    }
+}
+
+/// A SQLite database for a test about SQLite itself (its file, its locks, its pragmas).
+pub fn sqlite_database_url(dir: &Path) -> String {
+    format!("sqlite://{}", dir.join("aortagen.db").display())
+}
+
+/// Creates a uniquely named database on the PostgreSQL server and returns its URL.
+pub async fn create_postgres_database(server: &str) -> String {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    let name = format!(
+        "test_{}_{n}_{:08x}",
+        std::process::id(),
+        rand::random::<u32>()
+    );
+    let admin = aortagen::db::open(server, 1, &Default::default())
+        .await
+        .expect("the PostgreSQL test server answers");
+    sqlx::query(sqlx::AssertSqlSafe(format!("create database {name}")))
+        .execute(&admin)
+        .await
+        .expect("a test database is created");
+    admin.close().await;
+    let (base, _) = server
+        .rsplit_once('/')
+        .expect("a server URL ends in /DATABASE");
+    format!("{base}/{name}")
+}
+
 /// Starts a service on a fresh temporary database with `engine`.
 pub async fn spawn_app_with(engine: AnalyticEngine) -> TestApp {
     let dir = Arc::new(tempfile::tempdir().expect("temp dir"));
-    let url = format!("sqlite://{}", dir.path().join("aortagen.db").display());
+    let url = fresh_database_url(dir.path()).await;
     spawn_on(engine, dir, url).await
 }
 
 /// Starts a service with the default analytic engine and settings changed by `configure`.
 pub async fn spawn_app_configured(configure: impl FnOnce(&mut Config)) -> TestApp {
     let dir = Arc::new(tempfile::tempdir().expect("temp dir"));
-    let url = format!("sqlite://{}", dir.path().join("aortagen.db").display());
+    let url = fresh_database_url(dir.path()).await;
     spawn_on_configured(AnalyticEngine::default(), dir, url, configure).await
 }
 
@@ -122,7 +167,7 @@ pub async fn spawn_on_configured(
     config.max_json_bytes = MAX_JSON;
     config.max_archive_entries = MAX_ARCHIVE_ENTRIES;
     config.max_archive_bytes = MAX_ARCHIVE_BYTES;
-    config.models_dir = dir.path().join("models");
+    config.storage.models_dir = dir.path().join("models");
     configure(&mut config);
     let app = start(Arc::new(engine), dir, url, config).await;
     let model_dir = app.dir.path().join("models").join(MODEL);
@@ -144,9 +189,9 @@ pub async fn spawn_neural(models: &[&str], chamfer_points: usize) -> TestApp<Sdf
             .join(name);
         copy_dir(&from, &dir.path().join("models").join(name));
     }
-    let url = format!("sqlite://{}", dir.path().join("aortagen.db").display());
+    let url = fresh_database_url(dir.path()).await;
     let mut config = Config::with_database(url.clone(), "127.0.0.1:0");
-    config.models_dir = dir.path().join("models");
+    config.storage.models_dir = dir.path().join("models");
     let engine = SdfEngine::new(Backend::default()).with_chamfer_points(chamfer_points);
     start(Arc::new(engine), dir, url, config).await
 }
@@ -281,6 +326,24 @@ impl<E> TestApp<E> {
                 done => outcomes.push(done),
             }
         }
+    }
+
+    /// Runs queued tasks in the background until none is claimable (what one worker does
+    /// until it idles); aborting the handle is a process dying mid-task.
+    pub fn spawn_pending_jobs(&self) -> tokio::task::JoinHandle<Vec<ExecutionOutcome>>
+    where
+        E: Send + Sync + 'static,
+    {
+        let ctx = self.state.jobs.clone();
+        tokio::spawn(async move {
+            let mut outcomes = Vec::new();
+            loop {
+                match try_execute_job(&ctx).await.expect("job runs") {
+                    ExecutionOutcome::EmptyQueue => return outcomes,
+                    done => outcomes.push(done),
+                }
+            }
+        })
     }
 
     /// Counts rows of a table.

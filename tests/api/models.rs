@@ -139,7 +139,13 @@ async fn meshes_recognised_by_content_are_stored_so_training_reads_every_one() {
         String::from_utf8_lossy(&r.body)
     );
     assert_eq!(r.json()["shapes"], 3);
-    let input = app.state.config.models_dir.join("sniffed").join("input");
+    let input = app
+        .state
+        .config
+        .storage
+        .models_dir
+        .join("sniffed")
+        .join("input");
     let mut stored: Vec<String> = std::fs::read_dir(&input)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

@@ -83,8 +83,15 @@ async fn health_readiness_and_metrics_answer() {
     assert!(text.contains("aortagen_shapes_generated_total 2"));
     assert!(
         text.contains(
-            "aortagen_job_duration_seconds_count{kind=\"cohort\",outcome=\"succeeded\"} 1"
-        )
+            "aortagen_task_duration_seconds_count{kind=\"shape\",outcome=\"succeeded\"} 2"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains(
+            "aortagen_task_duration_seconds_count{kind=\"metrics\",outcome=\"succeeded\"} 1"
+        ),
+        "{text}"
     );
     assert!(text.contains("route=\"/v1/cohorts\",status=\"202\""));
     app.state.jobs.controls.shut_down();

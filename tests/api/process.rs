@@ -367,14 +367,14 @@ pub fn ellipsoid_obj(axes: [f64; 3], rings: usize, segments: usize) -> Vec<u8> {
 }
 
 /// Opens the database directly (the server must be stopped) and runs `f` on it.
-pub fn with_database<T>(path: &Path, f: impl AsyncFnOnce(&sqlx::SqlitePool) -> T) -> T {
+pub fn with_database<T>(path: &Path, f: impl AsyncFnOnce(&aortagen::db::Pool) -> T) -> T {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .expect("runtime");
     runtime.block_on(async {
         let url = format!("sqlite://{}", path.display());
-        let pool = sqlx::SqlitePool::connect(&url)
+        let pool = aortagen::db::open(&url, 2, &Default::default())
             .await
             .expect("database opens");
         let out = f(&pool).await;

@@ -5,18 +5,12 @@
 
 use std::sync::atomic::Ordering;
 
-use aortagen::jobs::{ExecutionOutcome, try_execute_job};
 use axum::http::{Method, StatusCode};
 use serde_json::{Value, json};
 
 use crate::engine::{AnalyticEngine, TRAINING_SHAPES};
 use crate::helpers::{TestApp, cohort_body, spawn_app, spawn_app_with, spawn_on};
 use crate::jobs::wait_for_calls;
-
-fn spawn_one_job(app: &TestApp) -> tokio::task::JoinHandle<anyhow::Result<ExecutionOutcome>> {
-    let ctx = app.state.jobs.clone();
-    tokio::spawn(async move { try_execute_job(&ctx).await })
-}
 
 async fn retry(app: &TestApp, cohort: i64) -> crate::helpers::TestResponse {
     let path = format!("/v1/cohorts/{cohort}/retry");
@@ -26,7 +20,7 @@ async fn retry(app: &TestApp, cohort: i64) -> crate::helpers::TestResponse {
 /// (index, mesh digest, novelty) of every stored shape, in index order.
 async fn shapes_of(app: &TestApp, cohort: i64) -> Vec<(i64, String, Option<f64>)> {
     sqlx::query_as(
-        "select shape_index, mesh_sha256, novelty_cd from shape where cohort_id = ?
+        "select shape_index, mesh_sha256, novelty_cd from shape where cohort_id = $1
          order by shape_index",
     )
     .bind(cohort)
@@ -48,14 +42,14 @@ async fn a_retried_cancelled_cohort_ends_with_the_shapes_of_an_uninterrupted_run
     .await;
     let body = cohort_body(5, 2);
     let id = app.create_cohort_ok(&body).await;
-    let run = spawn_one_job(&app);
+    let run = app.spawn_pending_jobs();
     wait_for_calls(&app, 3).await;
     let cancel = format!("/v1/cohorts/{id}/cancel");
     assert_eq!(
         app.request(Method::POST, &cancel, &[], "").await.status,
         StatusCode::ACCEPTED
     );
-    run.await.unwrap().unwrap();
+    run.await.unwrap();
     assert_eq!(cohort(&app, id).await["status"], "cancelled");
     let kept = shapes_of(&app, id).await;
     assert_eq!(kept.len(), 2);
@@ -120,7 +114,7 @@ async fn only_failed_or_cancelled_cohorts_can_be_retried() {
     .await;
     let running = app.create_cohort_ok(&cohort_body(4, 2)).await;
     let queued = app.create_cohort_ok(&cohort_body(2, 2)).await;
-    let run = spawn_one_job(&app);
+    let run = app.spawn_pending_jobs();
     wait_for_calls(&app, 3).await;
     for (id, state) in [(running, "running"), (queued, "queued")] {
         let r = retry(&app, id).await;
@@ -130,7 +124,7 @@ async fn only_failed_or_cancelled_cohorts_can_be_retried() {
         assert!(detail.contains(state), "{detail}");
     }
     app.engine.release.store(true, Ordering::SeqCst);
-    run.await.unwrap().unwrap();
+    run.await.unwrap();
     app.run_pending_jobs().await;
     let r = retry(&app, running).await;
     assert_eq!(r.status, StatusCode::CONFLICT);
@@ -164,7 +158,7 @@ async fn the_novelty_surfaces_are_stored_once_and_reused_after_a_restart() {
     );
     assert_eq!(first.count("novelty_surface").await, TRAINING_SHAPES as i64);
     let setup: i64 = sqlx::query_scalar(
-        "select setup_done from job where job_id = (select job_id from cohort where cohort_id = ?)",
+        "select setup_done from job where job_id = (select job_id from cohort where cohort_id = $1)",
     )
     .bind(a)
     .fetch_one(&first.state.pool)
@@ -197,39 +191,4 @@ async fn the_novelty_surfaces_are_stored_once_and_reused_after_a_restart() {
         second.engine.surfaces_built.load(Ordering::SeqCst),
         TRAINING_SHAPES
     );
-}
-
-#[tokio::test]
-async fn storing_setup_counts_as_progress_when_a_restart_looks_for_stalls() {
-    let app = spawn_app().await;
-    let pool = &app.state.pool;
-    let stalled = app.create_cohort_ok(&cohort_body(2, 2)).await;
-    let progressing = app.create_cohort_ok(&cohort_body(2, 2)).await;
-    let job_of = |cohort: i64| {
-        sqlx::query_scalar::<_, i64>("select job_id from cohort where cohort_id = ?")
-            .bind(cohort)
-            .fetch_one(pool)
-    };
-    let (stalled_job, progressing_job) = (
-        job_of(stalled).await.unwrap(),
-        job_of(progressing).await.unwrap(),
-    );
-    // Both are claimed; only one stores a setup result before the process dies.
-    for _ in 0..2 {
-        aortagen::db::jobs::claim_next(pool).await.unwrap().unwrap();
-    }
-    aortagen::db::novelty_surfaces::store(pool, progressing_job, "ellipsoids", 64, 0, b"mesh")
-        .await
-        .unwrap();
-    let (requeued, failed) = aortagen::db::jobs::requeue_interrupted(pool, 1)
-        .await
-        .unwrap();
-    assert_eq!((requeued, failed), (1, 1));
-    let status = |job: i64| {
-        sqlx::query_scalar::<_, String>("select status from job where job_id = ?")
-            .bind(job)
-            .fetch_one(pool)
-    };
-    assert_eq!(status(stalled_job).await.unwrap(), "failed");
-    assert_eq!(status(progressing_job).await.unwrap(), "queued");
 }

@@ -178,12 +178,14 @@ async fn cohort_metrics_hold_the_pairwise_chamfer_of_the_stored_meshes() {
     let ids: Vec<i64> = shapes.iter().map(|s| s["id"].as_i64().unwrap()).collect();
     assert_eq!(m["shape_ids"], serde_json::json!(ids));
     assert_eq!(m["summary"]["pairs"], 6);
-    let blobs: Vec<Vec<u8>> =
-        sqlx::query_scalar("select mesh from shape where cohort_id = ? order by shape_index")
-            .bind(id)
-            .fetch_all(&app.state.pool)
-            .await
-            .unwrap();
+    let blobs: Vec<Vec<u8>> = sqlx::query_scalar(
+        "select b.bytes from shape s join blob b on b.sha256 = s.mesh_sha256
+             where s.cohort_id = $1 order by s.shape_index",
+    )
+    .bind(id)
+    .fetch_all(&app.state.pool)
+    .await
+    .unwrap();
     let meshes: Vec<_> = blobs
         .iter()
         .map(|b| mesh_blob::decode(b).unwrap())

@@ -103,7 +103,22 @@ async fn a_job_hitting_a_storage_fault_goes_back_to_the_queue_and_finishes_later
     .await;
     let id = app.create_cohort_ok(&cohort_body(3, 2)).await;
     let ctx = app.state.jobs.clone();
-    let run = tokio::spawn(async move { try_execute_job(&ctx).await });
+    // Tasks run one after another until one ends on the storage fault.
+    let run = tokio::spawn(async move {
+        loop {
+            let outcome = try_execute_job(&ctx).await?;
+            if matches!(
+                outcome,
+                ExecutionOutcome::EmptyQueue
+                    | ExecutionOutcome::TaskCompleted {
+                        outcome: RunOutcome::StorageFault(_),
+                        ..
+                    }
+            ) {
+                return anyhow::Ok(outcome);
+            }
+        }
+    });
     wait_for_calls(&app, 2).await;
 
     // Shape 0 is stored; shape 1 is being generated when storage turns read-only.

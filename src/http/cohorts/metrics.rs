@@ -207,7 +207,7 @@ fn novelty_metrics(
         redraws_total: shapes.iter().map(|s| s.redraws).sum(),
         not_met: shapes
             .iter()
-            .filter(|s| s.novelty_met == Some(false))
+            .filter(|s| s.novelty_met.is_some_and(|m| !m.0))
             .count() as i64,
         nearest_training_counts: counts,
     }

@@ -17,8 +17,9 @@ use super::jobs::stop_job;
 use crate::cohort::targets::feasibility::check_feasible;
 use crate::cohort::{CohortRequest, RequestLimits, Targets};
 use crate::db::states::{JobStatus, ModelStatus};
-use crate::db::{self, cohorts::CohortRow, jobs::CancelOutcome, models::ModelRow};
+use crate::db::{self, cohorts::CohortRow, models::ModelRow};
 use crate::engine::ModelInfo;
+use crate::jobs::CancelOutcome;
 use crate::jobs::Job;
 use crate::jobs::cohort::CohortPayload;
 use crate::jobs::setup::training_anatomy;
@@ -341,7 +342,7 @@ async fn delete_cohort(
             format!("cohort {id} started running; it is being cancelled, delete it afterwards");
         return Err(ApiError::Conflict(msg));
     }
-    let mut tx = state.pool.begin_with(db::BEGIN_WRITE).await?;
+    let mut tx = db::begin_write(&state.pool).await?;
     db::cohorts::delete(&mut tx, cohort.cohort_id).await?;
     db::jobs::delete(&mut tx, cohort.job_id).await?;
     tx.commit().await?;

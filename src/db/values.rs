@@ -1,0 +1,93 @@
+//! Column values whose storage both backends share: JSON kept as text and flags kept as
+//! 0/1 integers. sqlx's runtime-chosen driver (`Any`) maps only the plain types (integers,
+//! floats, text, bytes, bool), so these two are spelled out here once.
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+use sqlx::any::{Any, AnyTypeInfo, AnyTypeInfoKind};
+use sqlx::encode::IsNull;
+use sqlx::error::BoxDynError;
+use sqlx::{Database, Decode, Encode, Type, ValueRef};
+
+/// A value stored as JSON text (`text` on both backends, never `jsonb`, so the stored bytes
+/// and the API's echo of them are the same everywhere). Serialises as the value itself.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(transparent)]
+pub struct Json<T>(pub T);
+
+impl<T> Type<Any> for Json<T> {
+    fn type_info() -> AnyTypeInfo {
+        <String as Type<Any>>::type_info()
+    }
+
+    fn compatible(ty: &AnyTypeInfo) -> bool {
+        <String as Type<Any>>::compatible(ty)
+    }
+}
+
+impl<T: Serialize> Encode<'_, Any> for Json<T> {
+    fn encode_by_ref(
+        &self,
+        buf: &mut <Any as Database>::ArgumentBuffer,
+    ) -> Result<IsNull, BoxDynError> {
+        let text = serde_json::to_string(&self.0)?;
+        <String as Encode<'_, Any>>::encode(text, buf)
+    }
+}
+
+impl<'r, T: DeserializeOwned> Decode<'r, Any> for Json<T> {
+    fn decode(value: <Any as Database>::ValueRef<'r>) -> Result<Self, BoxDynError> {
+        let text = <String as Decode<'r, Any>>::decode(value)?;
+        Ok(Self(serde_json::from_str(&text)?))
+    }
+}
+
+/// A yes/no column, stored as the integer 0 or 1 on both backends (a CHECK constraint
+/// keeps it so) and read back as a `bool` (serialised as one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(transparent)]
+pub struct Flag(pub bool);
+
+impl From<bool> for Flag {
+    fn from(value: bool) -> Self {
+        Self(value)
+    }
+}
+
+impl From<Flag> for bool {
+    fn from(flag: Flag) -> Self {
+        flag.0
+    }
+}
+
+impl Type<Any> for Flag {
+    fn type_info() -> AnyTypeInfo {
+        <i64 as Type<Any>>::type_info()
+    }
+
+    fn compatible(ty: &AnyTypeInfo) -> bool {
+        ty.kind().is_integer() || ty.kind() == AnyTypeInfoKind::Bool
+    }
+}
+
+impl Encode<'_, Any> for Flag {
+    fn encode_by_ref(
+        &self,
+        buf: &mut <Any as Database>::ArgumentBuffer,
+    ) -> Result<IsNull, BoxDynError> {
+        <i64 as Encode<'_, Any>>::encode(i64::from(self.0), buf)
+    }
+}
+
+impl<'r> Decode<'r, Any> for Flag {
+    fn decode(value: <Any as Database>::ValueRef<'r>) -> Result<Self, BoxDynError> {
+        if value.type_info().kind() == AnyTypeInfoKind::Bool {
+            return Ok(Self(<bool as Decode<'r, Any>>::decode(value)?));
+        }
+        match <i64 as Decode<'r, Any>>::decode(value)? {
+            0 => Ok(Self(false)),
+            1 => Ok(Self(true)),
+            other => Err(format!("{other} is not a flag (0 or 1)").into()),
+        }
+    }
+}
