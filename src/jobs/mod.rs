@@ -268,11 +268,14 @@ pub async fn expire_dead_local_leases(pool: &db::Pool) -> anyhow::Result<u64> {
     Ok(expired)
 }
 
+/// Stop flags of the tasks this process runs, by job: (task id, flag).
+type RunningTasks = HashMap<i64, Vec<(i64, Arc<AtomicBool>)>>;
+
 /// Interrupt flags of running tasks, shared by the workers (which pass them to the engine),
 /// the API (cancel) and the shutdown path.
 #[derive(Clone, Default)]
 pub struct JobControls {
-    running: Arc<Mutex<HashMap<i64, Vec<(i64, Arc<AtomicBool>)>>>>,
+    running: Arc<Mutex<RunningTasks>>,
     shutting_down: Arc<AtomicBool>,
 }
 
@@ -330,7 +333,7 @@ impl JobControls {
         self.shutting_down.load(Ordering::SeqCst)
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<i64, Vec<(i64, Arc<AtomicBool>)>>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, RunningTasks> {
         self.running.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
