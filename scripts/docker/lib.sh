@@ -101,24 +101,28 @@ wait_http() {
     done
 }
 
+# How cohort_roundtrip reaches the API: a command that takes curl's arguments. Default: the
+# host's curl; e.g. (docker exec -i CONTAINER curl) to ask from inside a container.
+CURL=(curl)
+
 # The cohort round trip against a running API: POST /v1/cohorts (bundled model "default",
 # 2 shapes of arity 2 at resolution 32), poll until the cohort succeeded, download the first
-# shape's GLB into DIR and check it.
+# shape's GLB into DIR and check it. Sets COHORT_ID, SHAPE_ID and COHORT_SECONDS.
 # Usage: cohort_roundtrip BASE_URL DIR [TIMEOUT_SECONDS]   (prints the timings)
 cohort_roundtrip() {
     local base="$1" dir="$2" limit="${3:-900}"
     local request='{"model_id":"default","count":2,"arity":2,"weighting":"dirichlet","seed":7,"resolution":32}'
-    local t0 body id status progress shape_id
+    local t0 body id status progress shape_id glb
     mkdir -p "$dir"
     t0="$(now)"
-    body="$(curl -fsS --max-time 30 -X POST "$base/v1/cohorts" -H 'content-type: application/json' -d "$request")" \
+    body="$("${CURL[@]}" -fsS --max-time 30 -X POST "$base/v1/cohorts" -H 'content-type: application/json' -d "$request")" \
         || { say "POST $base/v1/cohorts failed"; return 1; }
     id="$(json_get 'd["id"]' <<<"$body")"
     say "cohort $id accepted: $request"
     while :; do
-        body="$(curl -fsS --max-time 10 "$base/v1/cohorts/$id")" || { say "GET /v1/cohorts/$id failed"; return 1; }
+        body="$("${CURL[@]}" -fsS --max-time 10 "$base/v1/cohorts/$id")" || { say "GET /v1/cohorts/$id failed"; return 1; }
         status="$(json_get 'd["status"]' <<<"$body")"
-        progress="$(json_get '"%s/%s" % (d["progress"]["done"], d["progress"]["total"]) if isinstance(d.get("progress"), dict) else d.get("progress")' <<<"$body" 2>/dev/null || true)"
+        progress="$(json_get '"%s/%s" % (d["progress"]["done"], d["progress"]["total"])' <<<"$body" 2>/dev/null || true)"
         case "$status" in
             succeeded) break ;;
             failed | cancelled)
@@ -127,20 +131,24 @@ cohort_roundtrip() {
                 ;;
         esac
         if (($(now) - t0 > limit)); then
-            say "cohort $id still $status after ${limit} s"
+            say "cohort $id still $status (progress $progress) after ${limit} s"
             return 1
         fi
-        sleep 2
+        sleep 1
     done
-    local generated=$(($(now) - t0))
-    say "cohort $id succeeded in ${generated} s (progress $progress)"
-    body="$(curl -fsS --max-time 10 "$base/v1/cohorts/$id/shapes")"
+    COHORT_ID="$id"
+    COHORT_SECONDS=$(($(now) - t0))
+    say "cohort $id succeeded in ${COHORT_SECONDS} s (shapes $progress)"
+    body="$("${CURL[@]}" -fsS --max-time 10 "$base/v1/cohorts/$id/shapes")"
     shape_id="$(json_get 'd["items"][0]["id"]' <<<"$body")"
-    local t1
-    t1="$(now)"
-    curl -fsS --max-time 60 -o "$dir/shape-$shape_id.glb" "$base/v1/shapes/$shape_id/mesh" \
+    SHAPE_ID="$shape_id"
+    glb="$dir/shape-$shape_id.glb"
+    "${CURL[@]}" -fsS --max-time 60 "$base/v1/shapes/$shape_id/mesh" >"$glb" \
         || { say "GET /v1/shapes/$shape_id/mesh failed"; return 1; }
-    say "shape $shape_id mesh downloaded ($(stat -c %s "$dir/shape-$shape_id.glb") bytes) in $(($(now) - t1)) s"
-    check_glb "$dir/shape-$shape_id.glb"
-    say "timings: cohort generated in ${generated} s, whole round trip $(($(now) - t0)) s"
+    say "shape $shape_id: GLB downloaded, $(stat -c %s "$glb") bytes"
+    check_glb "$glb"
+    say "timings: cohort generated in ${COHORT_SECONDS} s; POST to validated GLB $(($(now) - t0)) s"
 }
+
+# A free TCP port on the loopback interface.
+free_port() { python3 -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'; }
