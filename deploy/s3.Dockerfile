@@ -13,7 +13,8 @@ RUN --mount=type=cache,target=/usr/local/cargo/registry \
 
 # --- runtime ---
 FROM debian:bookworm-slim
-# curl signs the health check's ListBuckets request (--aws-sigv4).
+# curl signs the health check's ListBuckets request (--aws-sigv4; curl 7.88 sends no payload
+# hash of its own, which s3s-fs requires: the check sends x-amz-content-sha256 itself).
 RUN apt-get update && apt-get install -y --no-install-recommends curl \
     && rm -rf /var/lib/apt/lists/* \
     && useradd --system --uid 10002 --home /data s3 \
@@ -28,6 +29,6 @@ ENV S3_PORT=8014 \
     RUST_LOG=s3s_fs=info
 EXPOSE 8014
 HEALTHCHECK --interval=5s --timeout=3s --start-period=10s --retries=5 \
-    CMD curl -fsS -o /dev/null --aws-sigv4 aws:amz:us-east-1:s3 --user "$S3_ACCESS_KEY:$S3_SECRET_KEY" \
+    CMD curl -fsS -o /dev/null -H "x-amz-content-sha256: UNSIGNED-PAYLOAD" --aws-sigv4 aws:amz:us-east-1:s3 --user "$S3_ACCESS_KEY:$S3_SECRET_KEY" \
         "http://127.0.0.1:$S3_PORT/" || exit 1
 ENTRYPOINT ["s3-entrypoint.sh"]

@@ -133,7 +133,8 @@ step "cohort round trip" cohort_roundtrip "$api" "$out"
 
 # The meshes went to the object store, not the database.
 s3cid="$("${compose[@]}" ps -a -q s3)"
-listing="$(docker exec "$s3cid" sh -c 'curl -fsS --aws-sigv4 aws:amz:us-east-1:s3 --user "$S3_ACCESS_KEY:$S3_SECRET_KEY" "http://127.0.0.1:$S3_PORT/aortagen?list-type=2&prefix=meshes/"')"
+# curl 7.88 signs the query string as written: parameters sorted, "/" encoded.
+listing="$(docker exec "$s3cid" sh -c 'curl -fsS -H "x-amz-content-sha256: UNSIGNED-PAYLOAD" --aws-sigv4 aws:amz:us-east-1:s3 --user "$S3_ACCESS_KEY:$S3_SECRET_KEY" "http://127.0.0.1:$S3_PORT/aortagen?list-type=2&prefix=meshes%2F"')"
 objects="$(grep -o '<Key>[^<]*</Key>' <<<"$listing" | wc -l)"
 [[ "$objects" -gt 0 ]] || die "no object under s3://aortagen/meshes/ after the cohort: $listing"
 say "s3://aortagen/meshes/ holds $objects objects"
