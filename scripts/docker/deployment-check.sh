@@ -75,7 +75,8 @@ for command in migrate worker; do
         missing+=("$command")
     fi
 done
-if ! docker run --rm --network none --entrypoint aortagen "$IMAGE" serve --help 2>/dev/null | grep -q -- '--workers'; then
+serve_help="$(docker run --rm --network none --entrypoint aortagen "$IMAGE" serve --help 2>/dev/null || true)"
+if ! grep -q -- '--workers' <<<"$serve_help"; then
     missing+=("serve --workers")
 fi
 if [[ ${#missing[@]} -gt 0 ]]; then
