@@ -128,8 +128,10 @@ for network in "${networks[@]}"; do
             printf 'AORTAGEN_DOCKER_NETWORK=%s\nAORTAGEN_DOCKER_STORAGE=%s\n' "$network" "$driver" >"$AORTAGEN_ENGINE_ENV"
             say "dockerd started (pid $started_pid): $(describe_engine), network mode $network"
             say "data root $AORTAGEN_DOCKER_HOME/data; stop it with: $0 stop"
-            if [[ "$network" == host ]]; then
-                say "bridge networking failed here: builds and containers must use --network host"
+            if [[ "$network" == host && "${AORTAGEN_DOCKER_NETWORK:-}" == host ]]; then
+                say "no bridge (AORTAGEN_DOCKER_NETWORK=host): builds and containers use --network host"
+            elif [[ "$network" == host ]]; then
+                say "bridge networking failed here: builds and containers use --network host"
             fi
             exit 0
         fi

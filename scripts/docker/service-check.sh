@@ -35,7 +35,9 @@ dump_logs() {
 port="$(free_port)"
 name="aortagen-service-check-$$"
 if [[ "$(engine_network)" == host ]]; then
-    run_args=(--network host -e "AORTAGEN_BIND=127.0.0.1:$port")
+    # The image's HEALTHCHECK asks port 8080; on the host's network the service has another.
+    run_args=(--network host -e "AORTAGEN_BIND=127.0.0.1:$port"
+        --health-cmd "curl -fsS http://127.0.0.1:$port/healthz || exit 1")
 else
     run_args=(-p "127.0.0.1:$port:8080")
 fi
