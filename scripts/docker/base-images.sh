@@ -217,7 +217,9 @@ build_rust() {
         --build-arg "RUST_VERSION=$rust_version" >"$AORTAGEN_DOCKER_HOME/rust-image.log" 2>&1 \
         || { tail -n 30 "$AORTAGEN_DOCKER_HOME/rust-image.log" >&2; die "building $RUST_IMAGE failed; see $AORTAGEN_DOCKER_HOME/rust-image.log"; }
     rm -rf "$context"
-    say "$RUST_IMAGE: built locally in $(elapsed $(($(now) - t0))) ($(docker run --rm $(run_network_args) "$RUST_IMAGE" rustc --version))"
+    local network_args
+    mapfile -t network_args < <(run_network_args)
+    say "$RUST_IMAGE: built locally in $(elapsed $(($(now) - t0))) ($(docker run --rm "${network_args[@]}" "$RUST_IMAGE" rustc --version))"
 }
 
 provide() {

@@ -129,6 +129,7 @@ for service in worker-1 worker-2; do
 done
 say "migrate finished (exit 0); api, worker-1 and worker-2 running"
 
+# shellcheck disable=SC2034  # read by cohort_roundtrip (lib.sh)
 CURL=(curl)
 step "cohort round trip" cohort_roundtrip "$api" "$out"
 

@@ -1,5 +1,6 @@
 # Shared helpers of the scripts in scripts/docker/ (sourced, not run).
 # shellcheck shell=bash
+# shellcheck disable=SC2034  # AORTAGEN_ROOT, CURL, COHORT_ID, SHAPE_ID are for the callers
 
 # The repository root, whichever script sourced this file.
 AORTAGEN_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"

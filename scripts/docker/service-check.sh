@@ -47,6 +47,7 @@ containers+=("$name")
 say "started $name from $IMAGE on 127.0.0.1:$port"
 wait_http "http://127.0.0.1:$port/healthz" 120 || { dump_logs "$name"; die "the API did not answer /healthz"; }
 say "/healthz answered $(($(now) - t0)) s after docker run"
+# shellcheck disable=SC2034  # read by cohort_roundtrip (lib.sh)
 CURL=(curl)
 cohort_roundtrip "http://127.0.0.1:$port" "$out/published" || { dump_logs "$name"; die "cohort round trip through the published port failed"; }
 published_seconds="$COHORT_SECONDS"
@@ -70,6 +71,7 @@ for _ in $(seq 1 120); do
     docker exec "$name" curl -fsS -o /dev/null --max-time 5 http://127.0.0.1:8080/healthz 2>/dev/null && break
     sleep 1
 done
+# shellcheck disable=SC2034  # read by cohort_roundtrip (lib.sh)
 CURL=(docker exec -i "$name" curl)
 cohort_roundtrip "http://127.0.0.1:8080" "$out/offline" || { dump_logs "$name"; die "cohort round trip without network failed"; }
 docker stop "$name" >/dev/null
