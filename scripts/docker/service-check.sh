@@ -21,7 +21,7 @@ containers=()
 cleanup() {
     local c
     for c in "${containers[@]}"; do
-        docker rm -f "$c" >/dev/null 2>&1 || true
+        docker rm -f -v "$c" >/dev/null 2>&1 || true
     done
 }
 trap cleanup EXIT
