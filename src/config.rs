@@ -45,9 +45,25 @@ pub struct StorageConfig {
     )]
     pub database_url: String,
 
-    /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to it.
+    /// Directory of models: the bundled model lives in `<dir>/default`, trained ones next to
+    /// it, and models fetched from the object store in `<dir>/.fetched`.
     #[arg(long, env = "AORTAGEN_MODELS_DIR", default_value = "models")]
     pub models_dir: PathBuf,
+
+    /// Where meshes and model bundles are kept: `db` (the database's `blob` table),
+    /// `file:///DIR` (a local or shared directory) or `s3://BUCKET/PREFIX` (an
+    /// S3-compatible store, configured by `AWS_ENDPOINT_URL`, `AWS_ACCESS_KEY_ID`,
+    /// `AWS_SECRET_ACCESS_KEY`, `AWS_REGION` and `AWS_ALLOW_HTTP`). Every process of a
+    /// deployment names the same store.
+    #[arg(long = "blob-store", env = "AORTAGEN_BLOB_STORE", default_value = "db")]
+    pub blob_store: crate::objects::BlobStoreUrl,
+}
+
+impl StorageConfig {
+    /// Where models fetched by digest are unpacked.
+    pub fn fetched_models_dir(&self) -> PathBuf {
+        self.models_dir.join(".fetched")
+    }
 }
 
 /// How a process runs tasks: shared by `serve` and `worker`.

@@ -74,7 +74,11 @@ impl Application {
             .await
             .with_context(|| format!("cannot listen on {}", config.bind))?;
         let port = listener.local_addr()?.port();
-        let jobs = job_context(pool.clone(), engine, &config.storage, &config.work);
+        let jobs = job_context(pool.clone(), engine, &config.storage, &config.work)?;
+        if config.storage.blob_store != crate::objects::BlobStoreUrl::Database {
+            tracing::info!(store = %config.storage.blob_store, "objects kept outside the database");
+        }
+        publish_models(&jobs).await;
         let mesh_cache = Arc::new(MeshCache::new(config.mesh_cache_bytes));
         let queue = JobQueue::new(pool.clone(), config.max_queue, config.retry_after_secs);
         let state = AppState {
@@ -130,6 +134,7 @@ impl Application {
                 tokio::spawn(worker::run_worker_until_stopped(i, ctx, wake, stop))
             })
             .collect();
+        let sweeper = tokio::spawn(sweep_orphans_periodically(self.state.jobs.clone()));
         let controls = self.state.jobs.controls.clone();
         let app = http::router(self.state.clone());
         tracing::info!(port = self.port, workers, "listening");
@@ -146,6 +151,7 @@ impl Application {
             joined = &mut served => Some(joined),
             _ = stop_rx.wait_for(|stopped| *stopped) => None,
         };
+        sweeper.abort();
         let deadline = tokio::time::Instant::now() + SHUTDOWN_GRACE;
         if early.is_some() {
             self.state.jobs.controls.shut_down();
@@ -191,17 +197,73 @@ pub fn job_context(
     engine: Arc<dyn Engine>,
     storage: &StorageConfig,
     work: &WorkerConfig,
-) -> JobContext {
-    JobContext {
-        objects: Objects::Database(pool.clone()),
+) -> anyhow::Result<JobContext> {
+    Ok(JobContext {
+        objects: Objects::open(&storage.blob_store, &pool)?,
         pool,
         engine,
         controls: JobControls::default(),
         metrics: Arc::new(ServiceMetrics::default()),
         models_dir: storage.models_dir.clone(),
+        fetched_models_dir: storage.fetched_models_dir(),
         leases: work.leases(),
         owner: format!("{}/api", jobs::process_identity()),
         housekeeping: Default::default(),
+    })
+}
+
+/// How long an object no row names is kept: longer than any writer takes between writing an
+/// object and committing the row that names it.
+pub const ORPHAN_GRACE: Duration = Duration::from_secs(3600);
+
+/// Sweeps the object store for orphans every ten minutes (API processes do; the sweep is
+/// idempotent, so several APIs sweeping is harmless).
+async fn sweep_orphans_periodically(ctx: JobContext) {
+    let mut every = tokio::time::interval(Duration::from_secs(600));
+    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        every.tick().await;
+        match ctx.objects.sweep(&ctx.pool, ORPHAN_GRACE).await {
+            Ok(0) => {}
+            Ok(n) => tracing::info!(objects = n, "orphaned objects swept"),
+            Err(e) => tracing::warn!(error = format!("{e:#}"), "cannot sweep the object store"),
+        }
+    }
+}
+
+/// Publishes the bundle of every ready model that has none yet (the bundled model at its
+/// first start, models of a database from before bundles), so workers elsewhere can fetch
+/// them. A model whose files are not on this machine is left for a process that has them.
+async fn publish_models(ctx: &JobContext) {
+    let models = match db::models::list(&ctx.pool).await {
+        Ok(models) => models,
+        Err(e) => {
+            tracing::warn!(error = %e, "cannot list the models to publish");
+            return;
+        }
+    };
+    for model in models {
+        let ready = model.status == ModelStatus::Ready;
+        if !ready || model.digest.is_some() || !Path::new(&model.dir_path).is_dir() {
+            continue;
+        }
+        let published = async {
+            let digest =
+                crate::objects::bundle::publish(&ctx.objects, Path::new(&model.dir_path)).await?;
+            if let Some(digest) = &digest {
+                db::models::set_digest(&ctx.pool, &model.model_id, digest).await?;
+            }
+            anyhow::Ok(digest)
+        };
+        match published.await {
+            Ok(Some(digest)) => {
+                tracing::info!(model_id = %model.model_id, %digest, "model published")
+            }
+            Ok(None) => {}
+            Err(e) => {
+                tracing::warn!(model_id = %model.model_id, error = format!("{e:#}"), "cannot publish the model")
+            }
+        }
     }
 }
 
@@ -250,7 +312,7 @@ pub async fn run_workers(
     .await?;
     db::require_current_schema(&pool).await?;
     free_dead_leases(&pool).await?;
-    let ctx = job_context(pool.clone(), engine, &storage, &work);
+    let ctx = job_context(pool.clone(), engine, &storage, &work)?;
     let (stop_tx, stop_rx) = watch::channel(false);
     let wake = Arc::new(tokio::sync::Notify::new());
     let mut handles: Vec<_> = (0..workers)

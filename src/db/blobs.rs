@@ -30,13 +30,16 @@ pub async fn exists(pool: &super::Pool, sha256: &str) -> sqlx::Result<bool> {
     Ok(n > 0)
 }
 
-/// Deletes the objects no shape names that were written before `before` (RFC 3339, the
+/// Deletes the objects no shape, model or training/fit job (its inputs) names that were written before `before` (RFC 3339, the
 /// grace period's start): objects whose rows were deleted, or whose writer died before its
 /// row. Returns how many.
 pub async fn sweep_unreferenced(pool: &super::Pool, before: &str) -> sqlx::Result<u64> {
     Ok(sqlx::query(
         "delete from blob where created_at < $1
-             and not exists (select 1 from shape s where s.mesh_sha256 = blob.sha256)",
+             and not exists (select 1 from shape s where s.mesh_sha256 = blob.sha256)
+             and not exists (select 1 from model m where m.digest = blob.sha256)
+             and not exists (select 1 from job j where j.kind <> 'cohort'
+                                 and j.payload like '%' || blob.sha256 || '%')",
     )
     .bind(before)
     .execute(pool)
@@ -44,12 +47,42 @@ pub async fn sweep_unreferenced(pool: &super::Pool, before: &str) -> sqlx::Resul
     .rows_affected())
 }
 
-/// The names of every object a row refers to (what a sweep of an external store keeps).
+/// The names of every object a row refers to (what a sweep of an external store keeps):
+/// meshes, model bundles, and the inputs training and fit jobs name in their payloads.
 pub async fn referenced(pool: &super::Pool) -> sqlx::Result<Vec<String>> {
-    sqlx::query_scalar(
+    let mut names: Vec<String> = sqlx::query_scalar(
         "select distinct mesh_sha256 from shape
          union select distinct digest from model where digest is not null",
     )
     .fetch_all(pool)
-    .await
+    .await?;
+    let payloads: Vec<String> =
+        sqlx::query_scalar("select payload from job where kind <> 'cohort'")
+            .fetch_all(pool)
+            .await?;
+    for payload in &payloads {
+        names.extend(sha256_names_in(payload));
+    }
+    Ok(names)
+}
+
+/// Every run of exactly 64 lowercase hex digits in `text` (the names objects have).
+fn sha256_names_in(text: &str) -> impl Iterator<Item = String> + '_ {
+    text.split(|c: char| !matches!(c, '0'..='9' | 'a'..='f'))
+        .filter(|run| run.len() == 64)
+        .map(str::to_owned)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn object_names_are_found_in_a_payload() {
+        let a = "0123456789abcdef".repeat(4);
+        let payload = format!(
+            r#"{{"input_digest":"{a}","seed":12,"x":"{}"}}"#,
+            "f".repeat(65)
+        );
+        let found: Vec<String> = super::sha256_names_in(&payload).collect();
+        assert_eq!(found, [a]);
+    }
 }

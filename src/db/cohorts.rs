@@ -152,7 +152,7 @@ pub async fn insert(conn: &mut super::Conn, c: &NewCohort<'_>) -> sqlx::Result<(
     .bind(r.resolution as i64)
     .bind(r.latent_noise)
     .bind(r.selection)
-    .bind(r.min_novelty)
+    .bind(super::NullableDouble(r.min_novelty))
     .bind(c.idempotency_key)
     .bind(c.request_hash)
     .bind(targets)

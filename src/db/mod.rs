@@ -25,7 +25,7 @@ use anyhow::Context;
 use sqlx::Connection;
 use sqlx::any::{AnyConnectOptions, AnyPoolOptions};
 
-pub use values::{Flag, Json};
+pub use values::{Flag, Json, NullableDouble};
 
 mod values;
 
@@ -264,6 +264,8 @@ pub enum StorageFault {
     Io,
     /// The database server cannot be reached (down, restarting, out of connections).
     Unreachable,
+    /// The external object store failed (unreachable, refusing, full).
+    ObjectStore,
 }
 
 impl std::fmt::Display for StorageFault {
@@ -273,8 +275,21 @@ impl std::fmt::Display for StorageFault {
             Self::Full => "disk is full",
             Self::Io => "storage I/O error",
             Self::Unreachable => "database unreachable",
+            Self::ObjectStore => "object store unavailable",
         })
     }
+}
+
+/// A failure of the external object store itself (unreachable, refusing, out of space),
+/// raised by `objects`: a storage fault, so work waits and retries instead of failing.
+#[derive(Debug, thiserror::Error)]
+#[error("object store {store}: {source}")]
+pub struct ObjectStoreFault {
+    /// The store's URL.
+    pub store: String,
+    /// What the store answered.
+    #[source]
+    pub source: Box<dyn std::error::Error + Send + Sync>,
 }
 
 /// Classifies a database error as a storage fault: SQLite's primary result codes
@@ -316,6 +331,8 @@ pub fn storage_fault_in(err: &anyhow::Error) -> Option<StorageFault> {
             storage_fault(e)
         } else if let Some(e) = cause.downcast_ref::<std::io::Error>() {
             io_fault(e)
+        } else if cause.is::<ObjectStoreFault>() {
+            Some(StorageFault::ObjectStore)
         } else {
             None
         }

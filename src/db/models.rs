@@ -20,6 +20,10 @@ pub struct ModelRow {
     pub status: ModelStatus,
     /// Registration time.
     pub created_at: String,
+    /// SHA-256 of the model's bundle in the object store, from which workers on any machine
+    /// fetch it; null for a model not published (still training, or no files).
+    #[serde(skip_serializing)]
+    pub digest: Option<String>,
 }
 
 impl ModelRow {
@@ -70,10 +74,25 @@ pub async fn set_trained<'e>(
     Ok(())
 }
 
+/// Records the digest of the model's published bundle.
+pub async fn set_digest<'e>(
+    ex: impl super::Executor<'e>,
+    model_id: &str,
+    digest: &str,
+) -> sqlx::Result<()> {
+    sqlx::query("update model set digest = $1 where model_id = $2")
+        .bind(digest)
+        .bind(model_id)
+        .execute(ex)
+        .await?;
+    Ok(())
+}
+
 /// One model by id.
 pub async fn get(pool: &super::Pool, model_id: &str) -> sqlx::Result<Option<ModelRow>> {
     sqlx::query_as(
-        "select model_id, dir_path, manifest, status, created_at from model where model_id = $1",
+        "select model_id, dir_path, manifest, status, created_at, digest from model
+         where model_id = $1",
     )
     .bind(model_id)
     .fetch_optional(pool)
@@ -83,7 +102,7 @@ pub async fn get(pool: &super::Pool, model_id: &str) -> sqlx::Result<Option<Mode
 /// All models, oldest first.
 pub async fn list(pool: &super::Pool) -> sqlx::Result<Vec<ModelRow>> {
     sqlx::query_as(
-        "select model_id, dir_path, manifest, status, created_at from model
+        "select model_id, dir_path, manifest, status, created_at, digest from model
          order by created_at, model_id",
     )
     .fetch_all(pool)

@@ -198,7 +198,7 @@ pub async fn insert(conn: &mut super::Conn, s: &NewShape<'_>) -> sqlx::Result<i6
     .bind(s.selection)
     .bind(s.attempt)
     .bind(s.redraws)
-    .bind(s.novelty_cd)
+    .bind(super::NullableDouble(s.novelty_cd))
     .bind(s.nearest_training_index)
     .bind(s.novelty_met.map(super::Flag))
     .bind(s.anatomy.map(Json))

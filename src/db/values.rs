@@ -91,3 +91,31 @@ impl<'r> Decode<'r, Any> for Flag {
         }
     }
 }
+
+/// An optional double bound as a parameter. sqlx 0.9's `Any` driver binds a `None` of
+/// `f64` as a PostgreSQL `real` (float4) null; a statement first prepared with it keeps
+/// that parameter type on the connection, and a later `Some` (sent as float8) is refused
+/// with "incorrect binary data format". This binds the null as `double precision`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NullableDouble(pub Option<f64>);
+
+impl Type<Any> for NullableDouble {
+    fn type_info() -> AnyTypeInfo {
+        <f64 as Type<Any>>::type_info()
+    }
+}
+
+impl Encode<'_, Any> for NullableDouble {
+    fn encode_by_ref(
+        &self,
+        buf: &mut <Any as Database>::ArgumentBuffer,
+    ) -> Result<IsNull, BoxDynError> {
+        match self.0 {
+            Some(v) => <f64 as Encode<'_, Any>>::encode(v, buf),
+            // The driver's two float kinds are swapped for nulls: a null of `f32`'s kind
+            // is the one it sends as float8. (The PostgreSQL API tests catch a fix
+            // upstream: the cohort insert would fail again.)
+            None => <Option<f32> as Encode<'_, Any>>::encode(None, buf),
+        }
+    }
+}

@@ -144,6 +144,10 @@ pub struct TrainingSpec {
     /// Uploaded shapes to keep out of training, chosen from `seed` (none: train on all).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub holdout: Option<usize>,
+    /// Digest of the input files' bundle in the object store: a worker on a machine
+    /// without `input_dir` fetches them from there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub input_digest: Option<String>,
 }
 
 /// A request to fit a latent to a new mesh for a trained model (network frozen).
@@ -155,6 +159,10 @@ pub struct FitSpec {
     pub iterations: usize,
     /// Seed of the sampling and the batches.
     pub seed: u64,
+    /// SHA-256 of the mesh file, kept in the object store: a worker on a machine without
+    /// `mesh_path` fetches it from there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh_sha256: Option<String>,
 }
 
 /// A fitted latent.

@@ -220,6 +220,9 @@ async fn fit_model(
     .map_err(anyhow::Error::from)??;
     let ext = format.extension();
 
+    // Kept in the object store too, for a worker on another machine; written before the
+    // submission's transaction, which holds SQLite's one write lock.
+    let mesh_sha256 = state.jobs.objects.put(&bytes).await?;
     let mut submission = state.queue.begin().await?;
     let name = match &upload.name {
         Some(name) => {
@@ -250,6 +253,7 @@ async fn fit_model(
             mesh_path: path.clone(),
             iterations: iterations as usize,
             seed: upload.seed,
+            mesh_sha256: Some(mesh_sha256),
         },
     });
     let job_id = submission.enqueue(&job, iterations as i64).await?;

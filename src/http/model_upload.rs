@@ -159,12 +159,28 @@ pub(super) async fn create_model(
 
     let model_dir = state.config.storage.models_dir.join(&model_id);
     let input_dir = model_dir.join("input");
+    // Kept in the object store too, for a worker on another machine; written before the
+    // submission's transaction, which holds SQLite's one write lock.
+    let named: Vec<(String, &[u8])> = files
+        .iter()
+        .zip(&formats)
+        .enumerate()
+        .map(|(i, ((_, bytes), format))| (input_file_name(i, *format), bytes.as_slice()))
+        .collect();
+    let input_digest = Some(
+        state
+            .jobs
+            .objects
+            .put(&crate::objects::bundle::pack_files(&named))
+            .await?,
+    );
     let mut submission = state.queue.begin().await?;
     if db::models::get(&state.pool, &model_id).await?.is_some() {
         return Err(ApiError::Conflict(format!(
             "model {model_id:?} already exists"
         )));
     }
+    write_inputs(&input_dir, &files, &formats).await?;
     let job = Job::Training(TrainingPayload {
         model_id: model_id.clone(),
         spec: TrainingSpec {
@@ -173,11 +189,11 @@ pub(super) async fn create_model(
             seed,
             epochs,
             holdout,
+            input_digest,
         },
     });
     let total_epochs = epochs.unwrap_or_else(|| Preset::Cpu.setup(seed).training.epochs);
     let job_id = submission.enqueue(&job, total_epochs as i64).await?;
-    write_inputs(&input_dir, &files, &formats).await?;
     let dir = model_dir.to_string_lossy();
     db::models::insert_if_absent(
         submission.conn(),
@@ -334,6 +350,12 @@ fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
 /// Writes each file as `NNNN.<ext>` with the extension of the format validation read it as
 /// (training reads a directory by extension), so no name or path from the client reaches
 /// the disk.
+/// The name the `i`-th uploaded mesh is stored under: its index and the format validation
+/// read it as (no name from the client reaches the disk).
+fn input_file_name(i: usize, format: MeshFormat) -> String {
+    format!("{i:04}.{}", format.extension())
+}
+
 async fn write_inputs(
     dir: &std::path::Path,
     files: &[(String, Vec<u8>)],
@@ -344,7 +366,7 @@ async fn write_inputs(
         .await
         .with_context(|| format!("cannot create {}", dir.display()))?;
     for (i, ((_, bytes), format)) in files.iter().zip(formats).enumerate() {
-        let path = dir.join(format!("{i:04}.{}", format.extension()));
+        let path = dir.join(input_file_name(i, *format));
         tokio::fs::write(&path, bytes)
             .await
             .with_context(|| format!("cannot write {}", path.display()))?;

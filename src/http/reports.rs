@@ -166,7 +166,7 @@ async fn model_inputs(state: &AppState, id: &str) -> Result<(Vec<(String, String
     let info = row.info();
     let shapes = info.map(|i| i.training_shapes.clone()).unwrap_or_default();
     let cds: Vec<f64> = shapes.iter().filter_map(|s| s.reconstruction_cd).collect();
-    let dir = row.dir_path.clone();
+    let dir = state.jobs.model_dir(&row).await?;
     let floor = tokio::task::spawn_blocking(move || {
         read_evaluation(FsPath::new(&dir)).map(|e| e.sampling_floor_median)
     })

@@ -5,7 +5,6 @@
 //! not yet stored, and each shape is the same whichever worker draws it.
 
 use std::collections::HashSet;
-use std::path::PathBuf;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
@@ -115,7 +114,7 @@ pub(super) async fn surface(
     } else {
         let (engine, dir, flag) = (
             ctx.engine.clone(),
-            PathBuf::from(&model.dir_path),
+            ctx.model_dir(&model).await?,
             run.flag.clone(),
         );
         let made = spawn_background(move || {
@@ -156,7 +155,7 @@ pub(super) async fn anatomy(
 ) -> Result<(), JobError> {
     let (_, model) = load(&ctx.pool, payload).await?;
     let count = training_count(&model)?;
-    let dir = PathBuf::from(&model.dir_path);
+    let dir = ctx.model_dir(&model).await?;
     setup::training_anatomy(&ctx.pool, ctx.engine.clone(), &model.model_id, &dir, count)
         .await
         .context("targets")?;
@@ -246,7 +245,7 @@ impl Generation<'_> {
     async fn generator(&self) -> Result<CohortGenerator, JobError> {
         let ctx = self.ctx;
         let count = training_count(self.model)?;
-        let model_dir = PathBuf::from(&self.model.dir_path);
+        let model_dir = ctx.model_dir(self.model).await?;
         let anchors = anchor_latents(&ctx.pool, &self.request.anchors)
             .await
             .context("anchors")?;

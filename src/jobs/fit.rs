@@ -3,7 +3,6 @@
 //! the job ends otherwise ([`super::lifecycle::finish_job`]). A fit has no
 //! checkpoint: an interrupted one starts again (it is short, and determined by its seed).
 
-use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Context;
@@ -39,8 +38,13 @@ pub(super) async fn run(
     let model = db::models::get(&ctx.pool, &payload.model_id)
         .await?
         .with_context(|| format!("model {:?} no longer exists", payload.model_id))?;
+    if let Some(sha) = &payload.spec.mesh_sha256 {
+        crate::objects::bundle::ensure_file(&ctx.objects, sha, &payload.spec.mesh_path)
+            .await
+            .context("the mesh to fit")?;
+    }
     let engine = ctx.engine.clone();
-    let model_dir = PathBuf::from(&model.dir_path);
+    let model_dir = ctx.model_dir(&model).await?;
     let (spec, task_flag) = (payload.spec.clone(), run.flag.clone());
     let fitted = run_with_progress(ctx, run, PROGRESS_INTERVAL, move |steps| {
         engine.fit_anchor(&model_dir, &spec, &task_flag, steps)

@@ -165,6 +165,8 @@ pub struct JobContext {
     pub metrics: Arc<ServiceMetrics>,
     /// Where trained models are written.
     pub models_dir: PathBuf,
+    /// Where models fetched from the object store are unpacked.
+    pub fetched_models_dir: PathBuf,
     /// Where meshes are stored.
     pub objects: crate::objects::Objects,
     /// Lease length, heartbeat and stall bound.
@@ -198,6 +200,13 @@ impl Housekeeping {
 }
 
 impl JobContext {
+    /// The directory on this machine holding `model`'s files, fetched from the object
+    /// store by digest when this machine does not have them.
+    pub async fn model_dir(&self, model: &crate::db::models::ModelRow) -> anyhow::Result<PathBuf> {
+        crate::objects::bundle::local_model_dir(&self.objects, &self.fetched_models_dir, model)
+            .await
+    }
+
     /// The same context for worker `index` of this process (its own lease owner name).
     pub fn for_worker(&self, index: usize) -> Self {
         Self {

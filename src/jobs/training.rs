@@ -29,6 +29,11 @@ pub(super) async fn run(
 ) -> Result<(), JobError> {
     tracing::Span::current().record("model_id", payload.model_id.as_str());
     stopped(&run.flag)?;
+    if let Some(digest) = &payload.spec.input_digest {
+        crate::objects::bundle::ensure_unpacked(&ctx.objects, digest, &payload.spec.input_dir)
+            .await
+            .context("the training inputs")?;
+    }
     let engine = ctx.engine.clone();
     let (spec, task_flag) = (payload.spec.clone(), run.flag.clone());
     // Saved epochs are the training's progress: lease renewals report them, so a training
@@ -38,9 +43,16 @@ pub(super) async fn run(
     })
     .await?;
     let info = trained.map_err(|e| stopped_or_failed(&run.flag, e.context("training")))?;
+    // Published before the row turns ready, so every machine can fetch what it names.
+    let digest = crate::objects::bundle::publish(&ctx.objects, &payload.spec.model_dir)
+        .await
+        .context("cannot publish the trained model")?;
     let mut tx = db::begin_write(&ctx.pool).await?;
     db::tasks::complete(&mut tx, &run.lease).await?;
     db::models::set_trained(&mut *tx, &payload.model_id, ModelStatus::Ready, Some(&info)).await?;
+    if let Some(digest) = &digest {
+        db::models::set_digest(&mut *tx, &payload.model_id, digest).await?;
+    }
     lifecycle::finish_job(&mut tx, run.lease.job_id, FinalStatus::Succeeded, None).await?;
     tx.commit()
         .await

@@ -624,3 +624,39 @@ async fn the_fit_migration_upgrades_a_populated_database() {
     .unwrap();
     assert_eq!(index, 1);
 }
+
+#[tokio::test]
+async fn a_training_cancelled_while_its_worker_died_leaves_its_model_failed_and_deletable() {
+    let app = spawn_app().await;
+    let r = upload_two_spheres(&app, "young").await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
+    let job = r.json()["job_id"].as_i64().unwrap();
+    // A worker of another process claims the training, then dies with it.
+    let owner = "elsewhere/1/1/0";
+    let lease = aortagen::db::tasks::claim(&app.state.pool, owner, "token", 60_000)
+        .await
+        .unwrap()
+        .expect("the training task is claimable");
+    assert_eq!(lease.job_id, job);
+    let mut conn = app.state.pool.acquire().await.unwrap();
+    aortagen::db::jobs::start(&mut conn, job).await.unwrap();
+    drop(conn);
+    let r = cancel(&app, &format!("/v1/jobs/{job}/cancel")).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", text(&r));
+    let m = app.get("/v1/models/young").await.json();
+    assert_eq!(m["status"], "training", "still running elsewhere: {m}");
+
+    // Its lease runs out; the next worker's housekeeping ends the job and the model.
+    aortagen::db::tasks::expire_owner(&app.state.pool, owner)
+        .await
+        .unwrap();
+    app.run_pending_jobs().await;
+    let j = app.get(&format!("/v1/jobs/{job}")).await.json();
+    assert_eq!(j["status"], "cancelled", "{j}");
+    let m = app.get("/v1/models/young").await.json();
+    assert_eq!(m["status"], "failed", "{m}");
+    let r = app
+        .request(Method::DELETE, "/v1/models/young", &[], "")
+        .await;
+    assert_eq!(r.status, StatusCode::NO_CONTENT, "{}", text(&r));
+}

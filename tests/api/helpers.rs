@@ -140,6 +140,13 @@ pub async fn spawn_app_with(engine: AnalyticEngine) -> TestApp {
     spawn_on(engine, dir, url).await
 }
 
+/// Starts a service on SQLite whatever the test server, for tests of SQLite's own faults.
+pub async fn spawn_sqlite_app_with(engine: AnalyticEngine) -> TestApp {
+    let dir = Arc::new(tempfile::tempdir().expect("temp dir"));
+    let url = sqlite_database_url(dir.path());
+    spawn_on(engine, dir, url).await
+}
+
 /// Starts a service with the default analytic engine and settings changed by `configure`.
 pub async fn spawn_app_configured(configure: impl FnOnce(&mut Config)) -> TestApp {
     let dir = Arc::new(tempfile::tempdir().expect("temp dir"));

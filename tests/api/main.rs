@@ -21,6 +21,7 @@ mod jobs;
 mod leases;
 mod limits;
 mod models;
+mod object_store;
 mod openapi;
 mod pipeline;
 mod process;

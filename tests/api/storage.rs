@@ -2,7 +2,7 @@
 //! service not ready, while reads keep working, nothing stored changes, jobs wait instead
 //! of failing, and everything resumes when the fault clears, without a restart.
 //!
-//! The fault injected is the service's `ReadOnlySwitch`: every pooled connection is set to
+//! These run on SQLite on every pass. The fault injected is the service's `ReadOnlySwitch`: every pooled connection is set to
 //! `PRAGMA query_only`, so each write fails with SQLITE_READONLY (primary code 8), the
 //! result SQLite gives when the database file or its file system is read-only. Removing
 //! write permission from the file is no test: the tests run as root (permissions do not
@@ -18,12 +18,12 @@ use axum::http::StatusCode;
 use serde_json::json;
 
 use crate::engine::AnalyticEngine;
-use crate::helpers::{cohort_body, spawn_app, spawn_app_with};
+use crate::helpers::{cohort_body, spawn_sqlite_app_with};
 use crate::jobs::wait_for_calls;
 
 #[tokio::test]
 async fn a_read_only_database_refuses_writes_keeps_reads_and_recovers() {
-    let app = spawn_app().await;
+    let app = spawn_sqlite_app_with(AnalyticEngine::default()).await;
     let id = app.create_cohort_ok(&cohort_body(2, 2)).await;
     app.run_pending_jobs().await;
     let shapes_before = app.get(&format!("/v1/cohorts/{id}/shapes")).await;
@@ -96,7 +96,7 @@ async fn a_read_only_database_refuses_writes_keeps_reads_and_recovers() {
 
 #[tokio::test]
 async fn a_job_hitting_a_storage_fault_goes_back_to_the_queue_and_finishes_later() {
-    let app = spawn_app_with(AnalyticEngine {
+    let app = spawn_sqlite_app_with(AnalyticEngine {
         hold_from_call: Some(1),
         ..Default::default()
     })

@@ -120,11 +120,12 @@ async fn check_targets(
     info: &ModelInfo,
     targets: &Targets,
 ) -> Result<()> {
+    let model_dir = state.jobs.model_dir(model).await?;
     let measuring = training_anatomy(
         &state.pool,
         state.jobs.engine.clone(),
         &model.model_id,
-        std::path::Path::new(&model.dir_path),
+        &model_dir,
         info.training_shape_count(),
     );
     let budget = std::time::Duration::from_secs(state.config.request_timeout_secs) / 3;

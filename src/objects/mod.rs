@@ -1,10 +1,19 @@
-//! Where the service's immutable objects live: generated meshes, named by the SHA-256 of
-//! their bytes. `AORTAGEN_BLOB_STORE=db` (the default) keeps them in the database's `blob`
-//! table; the rows that name them (a shape's `mesh_sha256`) are written after them, and
-//! objects no row names are swept after a grace period. Every read checks the bytes
-//! against their name, so a corrupt or tampered object is refused, never served.
+//! Where the service's immutable objects live: generated meshes and model bundles, named by
+//! the SHA-256 of their bytes. `AORTAGEN_BLOB_STORE=db` (the default) keeps them in the
+//! database's `blob` table, `file:///dir` in a directory and `s3://bucket/prefix` in an
+//! S3-compatible bucket ([`external`]). The rows that name them (a shape's `mesh_sha256`, a
+//! model's `digest`) are written after them, and objects no row names are swept after a
+//! grace period. Every read checks the bytes against their name, so a corrupt or tampered
+//! object is refused, never served.
+
+pub mod bundle;
+pub mod external;
+
+use std::collections::HashSet;
 
 use anyhow::Context;
+
+pub use external::{BlobStoreUrl, ExternalStore, StoreUnavailable};
 
 use crate::db::{self, shapes::MeshRef};
 use crate::digest::sha256_hex;
@@ -34,6 +43,8 @@ impl StoredMesh {
 pub enum Objects {
     /// The database's `blob` table.
     Database(db::Pool),
+    /// A directory or an S3-compatible bucket.
+    External(ExternalStore),
 }
 
 /// Why an object could not be read.
@@ -48,11 +59,23 @@ pub enum ObjectError {
 }
 
 impl Objects {
+    /// The store `url` names, beside the database `pool`.
+    pub fn open(url: &BlobStoreUrl, pool: &db::Pool) -> anyhow::Result<Self> {
+        Ok(match url {
+            BlobStoreUrl::Database => Self::Database(pool.clone()),
+            other => Self::External(ExternalStore::open(other)?),
+        })
+    }
+
     /// Stores `bytes` (a no-op when the object exists) and returns its name.
     pub async fn put(&self, bytes: &[u8]) -> anyhow::Result<String> {
         let sha = sha256_hex(bytes);
         match self {
             Self::Database(pool) => db::blobs::put(pool, &sha, bytes)
+                .await
+                .context("cannot store an object")?,
+            Self::External(store) => store
+                .put(&sha, bytes::Bytes::copy_from_slice(bytes))
                 .await
                 .context("cannot store an object")?,
         }
@@ -65,6 +88,11 @@ impl Objects {
             Self::Database(pool) => db::blobs::get(pool, sha256)
                 .await
                 .context("cannot read an object")?,
+            Self::External(store) => store
+                .get(sha256)
+                .await
+                .context("cannot read an object")?
+                .map(Vec::from),
         };
         match bytes {
             Some(b) if sha256_hex(&b) != sha256 => Err(ObjectError::Corrupt(sha256.to_owned())),
@@ -106,6 +134,13 @@ impl Objects {
         let before = rfc3339_ago(grace);
         match self {
             Self::Database(_) => Ok(db::blobs::sweep_unreferenced(pool, &before).await?),
+            Self::External(store) => {
+                // Names listed before the store is: an object written after this read has
+                // a row younger than the grace period, or none yet, and is spared.
+                let keep: HashSet<String> =
+                    db::blobs::referenced(pool).await?.into_iter().collect();
+                Ok(store.sweep(&keep, grace).await?)
+            }
         }
     }
 }
