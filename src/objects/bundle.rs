@@ -7,7 +7,7 @@
 //! the name's length (u32, little-endian), the name, the content's length (u64) and the
 //! content. The same files always give the same bytes, hence the same digest.
 
-use std::collections::HashMap;
+use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
 
@@ -172,9 +172,10 @@ fn place_unpacked(bundle: &[u8], target: &Path) -> anyhow::Result<()> {
     }
 }
 
-/// Directories of this machine known to hold the bundle of a digest.
-fn verified() -> &'static Mutex<HashMap<String, PathBuf>> {
-    static VERIFIED: OnceLock<Mutex<HashMap<String, PathBuf>>> = OnceLock::new();
+/// Directories of this machine checked to hold the bundle of a digest, as (digest, dir):
+/// several directories may hold one model (copies of it registered under other ids).
+fn verified() -> &'static Mutex<HashSet<(String, PathBuf)>> {
+    static VERIFIED: OnceLock<Mutex<HashSet<(String, PathBuf)>>> = OnceLock::new();
     VERIFIED.get_or_init(Default::default)
 }
 
@@ -182,7 +183,16 @@ fn remember(digest: &str, dir: &Path) {
     verified()
         .lock()
         .unwrap_or_else(|e| e.into_inner())
-        .insert(digest.to_owned(), dir.to_path_buf());
+        .insert((digest.to_owned(), dir.to_path_buf()));
+}
+
+/// Whether `dir` was checked to hold bundle `digest` and is still there.
+fn known(digest: &str, dir: &Path) -> bool {
+    dir.is_dir()
+        && verified()
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .contains(&(digest.to_owned(), dir.to_path_buf()))
 }
 
 /// The directory on this machine holding `model`'s files: its registered directory when it
@@ -198,15 +208,13 @@ pub async fn local_model_dir(
     let Some(digest) = model.digest.clone() else {
         return Ok(registered);
     };
-    let known = verified()
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .get(&digest)
-        .cloned();
-    if let Some(dir) = known {
-        return Ok(dir);
-    }
     let cached = cache_dir.join(&digest);
+    if let Some(dir) = [&registered, &cached]
+        .into_iter()
+        .find(|d| known(&digest, d))
+    {
+        return Ok(dir.clone());
+    }
     let (check_digest, check_registered, check_cached) =
         (digest.clone(), registered.clone(), cached.clone());
     let local = tokio::task::spawn_blocking(move || {
@@ -293,7 +301,7 @@ mod tests {
             digest: Some(digest.clone()),
         };
         // Not the publisher's directory: this test's digest must not be known here yet.
-        verified().lock().unwrap().remove(&digest);
+        verified().lock().unwrap().retain(|(d, _)| *d != digest);
         let cache = tempfile::tempdir().unwrap();
         let dir = local_model_dir(&objects, cache.path(), &row).await.unwrap();
         assert_eq!(dir, cache.path().join(&digest));

@@ -206,6 +206,8 @@ def fetch_object(store, sha):
     out = subprocess.run(
         ["curl", "-sf", "--aws-sigv4", f"aws:amz:{region}:s3", "--user",
          f"{os.environ['AWS_ACCESS_KEY_ID']}:{os.environ['AWS_SECRET_ACCESS_KEY']}",
+         # S3 wants the payload hash header; curl signs it when it is given
+         "-H", "x-amz-content-sha256: UNSIGNED-PAYLOAD",
          f"{endpoint}/{bucket}/{key}"], capture_output=True)
     return out.stdout if out.returncode == 0 else None
 

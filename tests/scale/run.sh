@@ -7,8 +7,9 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 root=$(pwd)
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/aortagen-target}"
-cargo build --locked --quiet
-binary="$CARGO_TARGET_DIR/debug/aortagen"
+# AORTAGEN_BINARY: an already built binary to run instead of building one.
+binary="${AORTAGEN_BINARY:-$CARGO_TARGET_DIR/debug/aortagen}"
+[[ -n "${AORTAGEN_BINARY:-}" ]] || cargo build --locked --quiet
 work=$(mktemp -d /tmp/aortagen-scale.XXXXXX)
 chmod 755 "$work" # the PostgreSQL server runs as another user under it
 cleanup() {
