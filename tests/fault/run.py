@@ -229,6 +229,7 @@ def main():
         data = stored_mesh(pg_url, sha)
         assert data is not None, f"shape {index}: object {sha} is missing"
         assert hashlib.sha256(data).hexdigest() == sha, f"shape {index}: stored bytes differ"
+    logs = sorted(set(logs))  # a restarted worker appends to its log file
     late = sum(open(p, errors="replace").read().count("lease was taken over") for p in logs)
     fetched = sum(open(p, errors="replace").read().count("model fetched from the object store")
                   for p in logs)
