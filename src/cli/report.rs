@@ -132,7 +132,7 @@ fn meshes_report(dir: &Path, points: usize, seed: u64) -> anyhow::Result<Report>
         title: format!("Meshes in {}", dir.display()),
         facts,
         sections: vec![
-            sections::pairwise_cd(&matrix),
+            sections::pairwise_cd(&sections::upper_triangle(&matrix), None),
             sections::distribution(
                 "Surface area",
                 "Area of each surface in the files' units.",

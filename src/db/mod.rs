@@ -253,6 +253,21 @@ pub fn is_unique_violation(err: &sqlx::Error) -> bool {
     matches!(err, sqlx::Error::Database(db) if db.is_unique_violation())
 }
 
+/// True when `err` is a violated foreign key: a row named a row another transaction just
+/// deleted, or a delete met a row another transaction just made refer to it.
+pub fn is_foreign_key_violation(err: &sqlx::Error) -> bool {
+    matches!(err, sqlx::Error::Database(db) if db.is_foreign_key_violation())
+}
+
+/// [`is_foreign_key_violation`] anywhere in an error chain.
+pub fn foreign_key_violation_in(err: &anyhow::Error) -> bool {
+    err.chain().any(|cause| {
+        cause
+            .downcast_ref::<sqlx::Error>()
+            .is_some_and(is_foreign_key_violation)
+    })
+}
+
 /// Why storage cannot take writes; the condition may clear without a restart.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StorageFault {

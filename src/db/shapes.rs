@@ -255,10 +255,23 @@ pub async fn get_mesh(pool: &super::Pool, shape_id: i64) -> sqlx::Result<Option<
     .await
 }
 
+/// A shape's mesh reference with its index in the cohort.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct IndexedMeshRef {
+    /// Index of the shape in its cohort.
+    pub shape_index: i64,
+    /// Its mesh.
+    #[sqlx(flatten)]
+    pub mesh: MeshRef,
+}
+
 /// All of a cohort's mesh names and transforms in index order (for the pairwise metrics).
-pub async fn cohort_meshes(pool: &super::Pool, cohort_id: i64) -> sqlx::Result<Vec<MeshRef>> {
+pub async fn cohort_meshes(
+    pool: &super::Pool,
+    cohort_id: i64,
+) -> sqlx::Result<Vec<IndexedMeshRef>> {
     sqlx::query_as(
-        "select shape_id, mesh_sha256, centre_x, centre_y, centre_z, radius
+        "select shape_index, shape_id, mesh_sha256, centre_x, centre_y, centre_z, radius
          from shape where cohort_id = $1 order by shape_index",
     )
     .bind(cohort_id)

@@ -3,6 +3,7 @@
 //! ([`SdfEngine`]) plugs in behind it and tests can run the whole service on an analytic
 //! stand-in.
 
+mod cache;
 mod neural;
 
 pub use neural::{EVALUATION_FILE, SdfEngine, read_evaluation};
@@ -243,8 +244,16 @@ pub trait Engine: Send + Sync + 'static {
         surfaces: &[TriMesh],
     ) -> anyhow::Result<Arc<NoveltyReference>>;
 
-    /// Pairwise Chamfer distance matrix (unit-ball coordinates) over a cohort's meshes.
-    fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>>;
+    /// Chamfer distances (unit-ball coordinates) of `pairs` of a cohort's shapes, named by
+    /// their index in the cohort; `meshes` holds each named shape with its index. A shape's
+    /// surface sample depends only on `seed` and its index, so a pair's distance is the same
+    /// whichever other pairs are computed with it.
+    fn pair_chamfer(
+        &self,
+        meshes: &[(u32, TriMesh)],
+        pairs: &[(u32, u32)],
+        seed: u64,
+    ) -> anyhow::Result<Vec<f64>>;
 
     /// Trains a model from the meshes in `spec.input_dir`, writes it to `spec.model_dir`
     /// and reports its facts. A run interrupted earlier continues from its last checkpoint
@@ -338,7 +347,12 @@ impl Engine for UnavailableEngine {
         self.refuse()
     }
 
-    fn pairwise_chamfer(&self, _: &[TriMesh], _: u64) -> anyhow::Result<Vec<Vec<f64>>> {
+    fn pair_chamfer(
+        &self,
+        _: &[(u32, TriMesh)],
+        _: &[(u32, u32)],
+        _: u64,
+    ) -> anyhow::Result<Vec<f64>> {
         self.refuse()
     }
 

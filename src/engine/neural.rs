@@ -10,12 +10,13 @@ use std::sync::{Arc, Mutex};
 use anyhow::{Context, bail};
 use rayon::prelude::*;
 
+use super::cache::{BoundedCache, DirStamp};
 use super::{
     Engine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
     TrainingSpec,
 };
 use crate::geometry::TriMesh;
-use crate::geometry::chamfer::{DEFAULT_CHAMFER_POINTS, pairwise_chamfer};
+use crate::geometry::chamfer::{ChamferIndex, DEFAULT_CHAMFER_POINTS, chamfer_between_serial};
 use crate::geometry::sampling::sample_surface;
 use crate::sdf::backend::Backend;
 use crate::sdf::data::DataSource;
@@ -45,11 +46,30 @@ pub struct SdfEngine {
     backend: Backend,
     extraction: ExtractionMethod,
     chamfer_points: usize,
-    /// Loaded models by directory, so each shape does not reload the weights. A model
-    /// directory's content never changes once registered.
-    models: Mutex<HashMap<PathBuf, Arc<Mutex<CachedModel>>>>,
-    /// Training surfaces for novelty, by model directory and resolution.
-    references: Mutex<HashMap<(PathBuf, usize), Arc<NoveltyReference>>>,
+    /// Loaded models by directory and content, so each shape does not reload the weights.
+    models: Mutex<BoundedCache<ModelKey, Arc<Mutex<CachedModel>>>>,
+    /// Training surfaces for novelty, by model directory, content and resolution.
+    references: Mutex<BoundedCache<ReferenceKey, Arc<NoveltyReference>>>,
+}
+
+/// Models kept loaded at once (each holds its weights and latents).
+const CACHED_MODELS: usize = 8;
+
+/// Novelty references kept at once (each holds the training surfaces' samples and trees:
+/// tens of MB at 30 000 points and 80 shapes).
+const CACHED_REFERENCES: usize = 8;
+
+/// A model directory and what it holds.
+type ModelKey = (PathBuf, DirStamp);
+
+/// A model directory, what it holds, and a resolution.
+type ReferenceKey = (PathBuf, DirStamp, usize);
+
+/// The cache key of a model directory's novelty reference at `resolution`.
+fn reference_key(dir: &Path, resolution: usize) -> anyhow::Result<ReferenceKey> {
+    let stamp =
+        DirStamp::of(dir).with_context(|| format!("cannot read the model in {}", dir.display()))?;
+    Ok((dir.to_path_buf(), stamp, resolution))
 }
 
 impl SdfEngine {
@@ -59,8 +79,8 @@ impl SdfEngine {
             backend,
             extraction: ExtractionMethod::Fast,
             chamfer_points: DEFAULT_CHAMFER_POINTS,
-            models: Mutex::new(HashMap::new()),
-            references: Mutex::new(HashMap::new()),
+            models: Mutex::new(BoundedCache::new(CACHED_MODELS)),
+            references: Mutex::new(BoundedCache::new(CACHED_REFERENCES)),
         }
     }
 
@@ -82,14 +102,19 @@ impl SdfEngine {
             .models
             .lock()
             .map_err(|_| anyhow::anyhow!("model cache poisoned"))?;
-        if let Some(model) = models.get(dir) {
-            return Ok(model.clone());
+        let key = (
+            dir.to_path_buf(),
+            DirStamp::of(dir)
+                .with_context(|| format!("cannot read the model in {}", dir.display()))?,
+        );
+        if let Some(model) = models.get(&key) {
+            return Ok(model);
         }
         let model = LoadedModel::load(dir, self.backend)
             .with_context(|| format!("cannot load the model in {}", dir.display()))?;
         let latents = model.latents();
         let cached = Arc::new(Mutex::new(CachedModel { model, latents }));
-        models.insert(dir.to_path_buf(), cached.clone());
+        models.insert(key, cached.clone());
         Ok(cached)
     }
 }
@@ -175,7 +200,7 @@ impl Engine for SdfEngine {
         resolution: usize,
         cancel: &AtomicBool,
     ) -> anyhow::Result<Arc<NoveltyReference>> {
-        let key = (model_dir.to_path_buf(), resolution);
+        let key = reference_key(model_dir, resolution)?;
         let cached = self.model(model_dir)?;
         // Held while extracting, so concurrent jobs on one model build the reference once.
         let cached = cached
@@ -187,7 +212,7 @@ impl Engine for SdfEngine {
                 .map_err(|_| anyhow::anyhow!("reference cache poisoned"))
         };
         if let Some(reference) = lock_references()?.get(&key) {
-            return Ok(reference.clone());
+            return Ok(reference);
         }
         let surfaces = training_surfaces(
             &cached.model,
@@ -231,8 +256,8 @@ impl Engine for SdfEngine {
         model_dir: &Path,
         resolution: usize,
     ) -> Option<Arc<NoveltyReference>> {
-        let key = (model_dir.to_path_buf(), resolution);
-        self.references.lock().ok()?.get(&key).cloned()
+        let key = reference_key(model_dir, resolution).ok()?;
+        self.references.lock().ok()?.get(&key)
     }
 
     fn novelty_reference_from(
@@ -245,22 +270,49 @@ impl Engine for SdfEngine {
         self.references
             .lock()
             .map_err(|_| anyhow::anyhow!("reference cache poisoned"))?
-            .insert((model_dir.to_path_buf(), resolution), reference.clone());
+            .insert(reference_key(model_dir, resolution)?, reference.clone());
         Ok(reference)
     }
 
-    fn pairwise_chamfer(&self, meshes: &[TriMesh], seed: u64) -> anyhow::Result<Vec<Vec<f64>>> {
-        let sets: Vec<Vec<[f32; 3]>> = meshes
+    fn pair_chamfer(
+        &self,
+        meshes: &[(u32, TriMesh)],
+        pairs: &[(u32, u32)],
+        seed: u64,
+    ) -> anyhow::Result<Vec<f64>> {
+        let indexed: Vec<(u32, ChamferIndex)> = meshes
             .par_iter()
-            .enumerate()
-            .map(|(i, mesh)| {
-                sample_surface(mesh, self.chamfer_points, seed.wrapping_add(i as u64)).points
+            .map(|(index, mesh)| {
+                let sample = sample_surface(
+                    mesh,
+                    self.chamfer_points,
+                    seed.wrapping_add(u64::from(*index)),
+                );
+                (*index, ChamferIndex::new(&sample.points))
             })
             .collect();
-        if let Some(i) = sets.iter().position(Vec::is_empty) {
-            bail!("shape {i} has no surface to sample");
+        if let Some((index, _)) = indexed.iter().find(|(_, set)| set.is_empty()) {
+            bail!("shape {index} has no surface to sample");
         }
-        Ok(pairwise_chamfer(&sets))
+        let position: HashMap<u32, usize> = indexed
+            .iter()
+            .enumerate()
+            .map(|(k, (index, _))| (*index, k))
+            .collect();
+        let set = |index: u32| -> anyhow::Result<&ChamferIndex> {
+            let k = position
+                .get(&index)
+                .with_context(|| format!("shape {index} was not given"))?;
+            Ok(&indexed[*k].1)
+        };
+        let resolved = pairs
+            .iter()
+            .map(|&(i, j)| Ok((set(i)?, set(j)?)))
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        Ok(resolved
+            .par_iter()
+            .map(|(a, b)| chamfer_between_serial(a, b))
+            .collect())
     }
 
     fn train_model(

@@ -107,21 +107,36 @@ pub enum ApiError {
     Internal(anyhow::Error),
 }
 
-/// Storage faults (read-only database, full disk) become 503; other database errors 500.
+/// What a request hears when a concurrent request deleted what it refers to, or started
+/// using what it deletes, between its checks and its write (the database refused the
+/// write on a foreign key; nothing was changed).
+const CONCURRENT_CHANGE: &str = "a concurrent request changed a resource this one refers to (it \
+    was deleted, or is now in use) while this one was being processed; nothing was changed: \
+    read the resources again and retry";
+
+/// Storage faults (read-only database, full disk) become 503; a foreign key broken by a
+/// concurrent request 409; other database errors 500.
 impl From<sqlx::Error> for ApiError {
     fn from(e: sqlx::Error) -> Self {
         match crate::db::storage_fault(&e) {
             Some(fault) => Self::StorageUnavailable(fault),
+            None if crate::db::is_foreign_key_violation(&e) => {
+                Self::Conflict(CONCURRENT_CHANGE.into())
+            }
             None => Self::Database(e),
         }
     }
 }
 
-/// As for database errors, a storage fault anywhere in the chain becomes 503.
+/// As for database errors, a storage fault anywhere in the chain becomes 503 and a broken
+/// foreign key 409.
 impl From<anyhow::Error> for ApiError {
     fn from(e: anyhow::Error) -> Self {
         match crate::db::storage_fault_in(&e) {
             Some(fault) => Self::StorageUnavailable(fault),
+            None if crate::db::foreign_key_violation_in(&e) => {
+                Self::Conflict(CONCURRENT_CHANGE.into())
+            }
             None => Self::Internal(e),
         }
     }

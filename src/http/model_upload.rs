@@ -180,6 +180,9 @@ pub(super) async fn create_model(
             "model {model_id:?} already exists"
         )));
     }
+    // Whatever is under this id's directory without a row (a deleted model's inputs,
+    // checkpoints or weights, an interrupted upload) must not become part of this model.
+    clear_leftovers(&model_dir).await?;
     write_inputs(&input_dir, &files, &formats).await?;
     let job = Job::Training(TrainingPayload {
         model_id: model_id.clone(),
@@ -354,6 +357,19 @@ fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
 /// read it as (no name from the client reaches the disk).
 fn input_file_name(i: usize, format: MeshFormat) -> String {
     format!("{i:04}.{}", format.extension())
+}
+
+/// Removes a directory left under a model id that has no row.
+async fn clear_leftovers(model_dir: &std::path::Path) -> anyhow::Result<()> {
+    use anyhow::Context;
+    match tokio::fs::remove_dir_all(model_dir).await {
+        Ok(()) => {
+            tracing::info!(dir = %model_dir.display(), "files left under a free model id removed");
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e).with_context(|| format!("cannot clear {}", model_dir.display())),
+    }
 }
 
 async fn write_inputs(

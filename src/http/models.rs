@@ -165,8 +165,34 @@ async fn delete_model(State(state): State<AppState>, Path(id): Path<String>) -> 
             "model {id:?} is used by {cohorts} cohort(s); delete them first"
         )));
     }
-    db::models::delete(&state.pool, &id).await?;
+    if db::models::delete(&state.pool, &id).await? {
+        remove_model_files(&state.config.storage.models_dir, &model).await;
+    }
     Ok(StatusCode::NO_CONTENT)
+}
+
+/// Removes a deleted model's directory when the service made it (an upload's
+/// `models_dir/<id>`: its inputs, checkpoints and weights), so a new model under the same id
+/// starts from nothing; the bundled model's directory stays (it is registered again at the
+/// next start). A failure is logged: the row is gone, and the next upload under that id
+/// clears what is left.
+async fn remove_model_files(models_dir: &std::path::Path, model: &ModelRow) {
+    let dir = models_dir.join(&model.model_id);
+    if model.model_id == crate::startup::DEFAULT_MODEL_ID
+        || std::path::Path::new(&model.dir_path) != dir
+    {
+        return;
+    }
+    match tokio::fs::remove_dir_all(&dir).await {
+        Ok(()) => tracing::info!(model_id = %model.model_id, "model files removed"),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => tracing::warn!(
+            model_id = %model.model_id,
+            dir = %dir.display(),
+            error = %e,
+            "cannot remove a deleted model's files"
+        ),
+    }
 }
 
 async fn load(state: &AppState, id: &str) -> Result<ModelRow> {

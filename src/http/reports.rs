@@ -17,6 +17,7 @@ use crate::db;
 use crate::db::cohorts::CohortRow;
 use crate::db::shapes::ShapeRow;
 use crate::engine::read_evaluation;
+use crate::jobs::stats::PairDistances;
 use crate::report::{Report, Section, footer, render_html, sections};
 
 /// Plots of a model, by name.
@@ -203,18 +204,21 @@ async fn cohort_inputs(state: &AppState, cohort: &CohortRow) -> Result<CohortInp
 impl CohortInputs {
     /// The sections of a cohort report, in [`COHORT_PLOTS`] order.
     fn sections(&self, min_novelty: Option<f64>) -> Result<Vec<Section>> {
-        let matrix: Vec<Vec<f64>> = match &self.matrix {
-            Some(json) => serde_json::from_str(json).map_err(anyhow::Error::from)?,
-            None => Vec::new(),
+        let distances: Option<PairDistances> = match &self.matrix {
+            Some(json) => Some(serde_json::from_str(json).map_err(anyhow::Error::from)?),
+            None => None,
         };
-        let shapes = &self.shapes;
-        cohort_sections(&matrix, shapes, min_novelty)
+        let pairwise = match &distances {
+            None => sections::pairwise_cd(&[], None),
+            Some(d) => sections::pairwise_cd(&d.values(), d.is_sampled().then(|| d.population())),
+        };
+        cohort_sections(pairwise, &self.shapes, min_novelty)
     }
 }
 
 /// Sections of a cohort report, in [`COHORT_PLOTS`] order.
 fn cohort_sections(
-    matrix: &[Vec<f64>],
+    pairwise: Section,
     shapes: &[ShapeRow],
     min_novelty: Option<f64>,
 ) -> Result<Vec<Section>> {
@@ -239,7 +243,7 @@ fn cohort_sections(
         )
     };
     Ok(vec![
-        sections::pairwise_cd(matrix),
+        pairwise,
         sections::novelty_cd(&novelty, floor.as_slice()),
         mm(
             "Annulus diameter",

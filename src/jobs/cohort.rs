@@ -21,6 +21,8 @@ use crate::db::tasks::NewTask;
 use crate::db::{self, cohorts::CohortRow, jobs::FinalStatus, models::ModelRow, states::TaskKind};
 use crate::engine::AnchorLatent;
 use crate::formats::mesh_blob;
+use crate::jobs::stats::PairDistances;
+use crate::stats::pair_sample::PairPlan;
 
 /// The payload of a `cohort` job.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -71,7 +73,8 @@ pub(super) async fn plan(pool: &db::Pool, payload: &CohortPayload) -> anyhow::Re
             .await?
             .is_none()
     {
-        tasks.push(NewTask::whole(TaskKind::Metrics));
+        let stored = db::cohort_metrics::stored_pair_keys(pool, cohort.cohort_id).await?;
+        tasks.extend(metrics_tasks(&cohort, &stored.into_iter().collect()));
     }
     tasks.extend(missing);
     Ok(tasks)
@@ -200,8 +203,39 @@ pub(super) async fn shape(
     Ok(())
 }
 
-/// The pairwise statistics of a finished cohort, committed with the task; the cohort's job
-/// succeeds with them.
+/// The pairs of a cohort its statistics are over (all of them, or a sample for a large
+/// cohort), drawn from the cohort's seed.
+fn pair_plan(cohort: &CohortRow) -> PairPlan {
+    PairPlan::new(cohort.count.max(0) as usize, cohort.seed as u64)
+}
+
+/// The metrics tasks of a cohort whose shapes are all stored: one per part of its pair
+/// plan whose pairs are not all stored yet, and at least one, which assembles them.
+fn metrics_tasks(cohort: &CohortRow, stored: &HashSet<(u32, u32)>) -> Vec<NewTask> {
+    let plan = pair_plan(cohort);
+    let mut tasks: Vec<NewTask> = (0..plan.task_count())
+        .filter(|&t| {
+            let pairs = plan.task_pairs(t);
+            pairs.is_empty() || !pairs.iter().all(|p| stored.contains(p))
+        })
+        .map(|t| NewTask {
+            kind: TaskKind::Metrics,
+            item: t as i64,
+        })
+        .collect();
+    if tasks.is_empty() {
+        tasks.push(NewTask {
+            kind: TaskKind::Metrics,
+            item: 0,
+        });
+    }
+    tasks
+}
+
+/// One part of a finished cohort's pairwise statistics: its pairs' Chamfer distances,
+/// committed with the task. The part that finds every other part done assembles the
+/// statistics, and the cohort's job succeeds with them. (Item -1, a metrics step queued
+/// by an older version, is every part at once.)
 pub(super) async fn metrics(
     ctx: &JobContext,
     run: &TaskRun,
@@ -209,17 +243,109 @@ pub(super) async fn metrics(
 ) -> Result<(), JobError> {
     let (cohort, _) = load(&ctx.pool, payload).await?;
     stopped(&run.flag)?;
-    let (matrix, summary) = compute_metrics(ctx, &cohort)
+    let plan = pair_plan(&cohort);
+    let pairs: Vec<(u32, u32)> = match usize::try_from(run.lease.item) {
+        Ok(part) => plan.task_pairs(part).to_vec(),
+        Err(_) => plan.pairs().to_vec(),
+    };
+    let distances = pair_distances(ctx, &cohort, &pairs)
         .await
         .context("pairwise metrics")?;
+    let job_id = run.lease.job_id;
     let mut tx = db::begin_write(&ctx.pool).await?;
     db::tasks::complete(&mut tx, &run.lease).await?;
-    db::cohort_metrics::upsert(&mut *tx, cohort.cohort_id, &matrix, &summary).await?;
-    lifecycle::finish_job(&mut tx, run.lease.job_id, FinalStatus::Succeeded, None).await?;
+    db::cohort_metrics::insert_pairs(&mut tx, cohort.cohort_id, &distances).await?;
+    // Touching the job's row orders this commit after any concurrent part's on
+    // PostgreSQL, so exactly one part sees all the others done.
+    db::jobs::set_progress(&mut tx, job_id, cohort.count).await?;
+    if db::tasks::unfinished_count(&mut tx, job_id, TaskKind::Metrics).await? == 0 {
+        let stored = db::cohort_metrics::stored_pairs(&mut tx, cohort.cohort_id).await?;
+        let (distances, summary) = assemble(&plan, stored).context("pairwise metrics")?;
+        db::cohort_metrics::upsert(&mut *tx, cohort.cohort_id, &distances, &summary).await?;
+        db::cohort_metrics::delete_pairs(&mut tx, cohort.cohort_id).await?;
+        lifecycle::finish_job(&mut tx, job_id, FinalStatus::Succeeded, None).await?;
+    }
     tx.commit()
         .await
         .context("cannot commit the cohort's metrics")?;
     Ok(())
+}
+
+/// The stored distances of every planned pair, as stored metrics and their summary; an
+/// error names a planned pair that is missing.
+fn assemble(
+    plan: &PairPlan,
+    stored: Vec<(u32, u32, f64)>,
+) -> anyhow::Result<(PairDistances, serde_json::Value)> {
+    let by_pair: std::collections::HashMap<(u32, u32), f64> =
+        stored.into_iter().map(|(i, j, d)| ((i, j), d)).collect();
+    let mut pairs = Vec::with_capacity(plan.pairs().len());
+    for &(i, j) in plan.pairs() {
+        let d = by_pair
+            .get(&(i, j))
+            .with_context(|| format!("the distance of shapes {i} and {j} is not stored"))?;
+        pairs.push((i, j, *d));
+    }
+    let distances = PairDistances::new(plan.shapes(), plan.is_sampled(), pairs);
+    let summary = stats::summarize_pairs(distances.values(), plan.population());
+    Ok((distances, serde_json::to_value(summary)?))
+}
+
+/// Chamfer distances of `pairs` (shape indices) over the stored unit-ball meshes, reading
+/// only the meshes those pairs name.
+async fn pair_distances(
+    ctx: &JobContext,
+    cohort: &CohortRow,
+    pairs: &[(u32, u32)],
+) -> anyhow::Result<Vec<(u32, u32, f64)>> {
+    if pairs.is_empty() {
+        return Ok(Vec::new());
+    }
+    let needed: HashSet<u32> = pairs.iter().flat_map(|&(i, j)| [i, j]).collect();
+    let rows = db::shapes::cohort_meshes(&ctx.pool, cohort.cohort_id).await?;
+    let mut stored = Vec::with_capacity(needed.len());
+    for row in rows {
+        let Ok(index) = u32::try_from(row.shape_index) else {
+            continue;
+        };
+        if needed.contains(&index) {
+            stored.push((index, ctx.objects.load(row.mesh).await?));
+        }
+    }
+    anyhow::ensure!(
+        stored.len() == needed.len(),
+        "{} of the {} shapes these pairs need are stored",
+        stored.len(),
+        needed.len()
+    );
+    let engine = ctx.engine.clone();
+    let seed = cohort.seed as u64;
+    let pairs = pairs.to_vec();
+    spawn_background(move || -> anyhow::Result<Vec<(u32, u32, f64)>> {
+        let meshes = stored
+            .iter()
+            .map(|(index, s)| {
+                let mesh = mesh_blob::decode(&s.mesh)
+                    .with_context(|| format!("shape {}", s.row.shape_id))?;
+                Ok((*index, mesh))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        let values = engine.pair_chamfer(&meshes, &pairs, seed)?;
+        anyhow::ensure!(
+            values.len() == pairs.len(),
+            "engine returned {} distances for {} pairs",
+            values.len(),
+            pairs.len()
+        );
+        anyhow::ensure!(values.iter().all(|v| v.is_finite()), "non-finite distance");
+        Ok(pairs
+            .iter()
+            .zip(values)
+            .map(|(&(i, j), d)| (i, j, d))
+            .collect())
+    })
+    .await
+    .map_err(join_error)?
 }
 
 /// The generation of one shape of a cohort.
@@ -340,8 +466,8 @@ impl Generation<'_> {
         let done = db::shapes::count_for_cohort(&mut *tx, self.cohort.cohort_id).await?;
         db::jobs::set_progress(&mut tx, job_id, done).await?;
         if db::tasks::unfinished_count(&mut tx, job_id, TaskKind::Shape).await? == 0 {
-            db::tasks::insert_missing(&mut tx, job_id, &[NewTask::whole(TaskKind::Metrics)])
-                .await?;
+            let tasks = metrics_tasks(self.cohort, &HashSet::new());
+            db::tasks::insert_missing(&mut tx, job_id, &tasks).await?;
         }
         tx.commit().await.context("cannot commit shape")?;
         Ok(())
@@ -365,41 +491,4 @@ async fn anchor_latents(pool: &db::Pool, ids: &[i64]) -> anyhow::Result<Vec<Anch
         });
     }
     Ok(out)
-}
-
-/// Pairwise Chamfer distances over the stored unit-ball meshes, and their summary.
-async fn compute_metrics(
-    ctx: &JobContext,
-    cohort: &CohortRow,
-) -> anyhow::Result<(Vec<Vec<f64>>, serde_json::Value)> {
-    let rows = db::shapes::cohort_meshes(&ctx.pool, cohort.cohort_id).await?;
-    let mut stored = Vec::with_capacity(rows.len());
-    for row in rows {
-        stored.push(ctx.objects.load(row).await?);
-    }
-    let engine = ctx.engine.clone();
-    let seed = cohort.seed as u64;
-    let matrix = spawn_background(move || -> anyhow::Result<Vec<Vec<f64>>> {
-        let meshes = stored
-            .iter()
-            .map(|s| {
-                mesh_blob::decode(&s.mesh).with_context(|| format!("shape {}", s.row.shape_id))
-            })
-            .collect::<anyhow::Result<Vec<_>>>()?;
-        let matrix = engine.pairwise_chamfer(&meshes, seed)?;
-        let n = meshes.len();
-        anyhow::ensure!(
-            matrix.len() == n && matrix.iter().all(|r| r.len() == n),
-            "engine returned a matrix that is not {n}×{n}"
-        );
-        anyhow::ensure!(
-            matrix.iter().flatten().all(|v| v.is_finite()),
-            "non-finite distance"
-        );
-        Ok(matrix)
-    })
-    .await
-    .map_err(join_error)??;
-    let summary = serde_json::to_value(stats::summarize(&matrix))?;
-    Ok((matrix, summary))
 }

@@ -55,16 +55,22 @@ pub fn reconstruction_cd(cds: &[f64], sampling_floor: Option<f64>) -> Section {
     )
 }
 
-/// Pairwise Chamfer distances among a cohort's shapes (each unordered pair once).
-pub fn pairwise_cd(matrix: &[Vec<f64>]) -> Section {
+/// Pairwise Chamfer distances among a cohort's shapes (each unordered pair once): every
+/// pair, or a random sample of the `sampled_from` pairs of a large cohort.
+pub fn pairwise_cd(values: &[f64], sampled_from: Option<u64>) -> Section {
+    let which = match sampled_from {
+        None => "Every unordered pair of generated shapes".to_owned(),
+        Some(population) => format!(
+            "A uniform random sample of {} of the {population} unordered pairs of generated \
+             shapes",
+            values.len()
+        ),
+    };
     distribution(
         "Pairwise Chamfer distance within the cohort",
-        &format!(
-            "Every unordered pair of generated shapes; a wider distribution means a more \
-             diverse cohort. {CHAMFER_UNITS}."
-        ),
+        &format!("{which}; a wider distribution means a more diverse cohort. {CHAMFER_UNITS}."),
         CD_LABEL,
-        &upper_triangle(matrix),
+        values,
         &[],
     )
 }

@@ -18,6 +18,7 @@ pub mod kde;
 pub mod ks;
 pub mod linalg;
 pub mod multivariate;
+pub mod pair_sample;
 pub mod rank;
 pub mod special;
 pub mod tost;

@@ -293,3 +293,62 @@ async fn ids_of_a_deleted_cohort_its_job_and_shapes_are_never_given_again() {
     // The URL a cache may hold as immutable names nothing now, not the new cohort's shape.
     assert_eq!(app.get(&mesh_path).await.status, StatusCode::NOT_FOUND);
 }
+
+/// Runs `body` (SQL statements) inside the table's trigger `when` (e.g. `before insert on
+/// cohort`), on either backend: the interleaving of a concurrent request at the exact
+/// moment between a handler's checks and its write.
+async fn install_trigger(app: &crate::helpers::TestApp, when: &str, body: &str) {
+    let pool = &app.state.pool;
+    let statements = match aortagen::db::Backend::of(pool) {
+        aortagen::db::Backend::Sqlite => vec![format!(
+            "create trigger concurrent_change {when} for each row begin {body}; end"
+        )],
+        aortagen::db::Backend::Postgres => vec![
+            format!(
+                "create function concurrent_change() returns trigger language plpgsql as
+                 $$ begin {body}; return new; end $$"
+            ),
+            format!(
+                "create trigger concurrent_change {when} for each row
+                 execute function concurrent_change()"
+            ),
+        ],
+    };
+    for sql in statements {
+        sqlx::query(sqlx::AssertSqlSafe(sql))
+            .execute(pool)
+            .await
+            .unwrap();
+    }
+}
+
+#[tokio::test]
+async fn a_model_deleted_while_a_cohort_is_posted_is_a_409_and_stores_nothing() {
+    let app = spawn_app().await;
+    // The model disappears after the request's checks passed, just before its insert.
+    install_trigger(
+        &app,
+        "before insert on cohort",
+        "delete from model where model_id = new.model_id",
+    )
+    .await;
+    let r = app.create_cohort(&cohort_body(2, 2)).await;
+    assert_eq!(
+        r.status,
+        StatusCode::CONFLICT,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    assert_eq!(r.header("content-type"), Some("application/problem+json"));
+    let detail = r.json()["detail"].as_str().unwrap().to_owned();
+    assert!(detail.contains("concurrent request"), "{detail}");
+    // The whole submission was rolled back: the model (deleted inside the refused
+    // transaction) is still there, and no cohort or job was stored.
+    for table in ["cohort", "job"] {
+        assert_eq!(app.count(table).await, 0, "{table}");
+    }
+    assert_eq!(
+        app.get(&format!("/v1/models/{MODEL}")).await.status,
+        StatusCode::OK
+    );
+}

@@ -186,16 +186,23 @@ impl Engine for AnalyticEngine {
         Ok(Arc::new(NoveltyReference::new(surfaces, NOVELTY_POINTS)?))
     }
 
-    fn pairwise_chamfer(&self, meshes: &[TriMesh], _: u64) -> anyhow::Result<Vec<Vec<f64>>> {
-        Ok(meshes
+    fn pair_chamfer(
+        &self,
+        meshes: &[(u32, TriMesh)],
+        pairs: &[(u32, u32)],
+        _: u64,
+    ) -> anyhow::Result<Vec<f64>> {
+        let mesh = |index: u32| {
+            meshes
+                .iter()
+                .find(|(i, _)| *i == index)
+                .map(|(_, m)| m)
+                .ok_or_else(|| anyhow::anyhow!("shape {index} was not given"))
+        };
+        pairs
             .iter()
-            .map(|a| {
-                meshes
-                    .iter()
-                    .map(|b| chamfer_distance(&a.positions, &b.positions))
-                    .collect()
-            })
-            .collect())
+            .map(|&(i, j)| Ok(chamfer_distance(&mesh(i)?.positions, &mesh(j)?.positions)))
+            .collect()
     }
 
     fn train_model(

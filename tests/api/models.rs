@@ -52,6 +52,51 @@ fn stl() -> Vec<u8> {
 }
 
 #[tokio::test]
+async fn a_deleted_models_id_trains_only_on_its_new_upload() {
+    let app = spawn_app().await;
+    let upload = |files: usize| {
+        let mut parts = vec![("id", None, b"reused".to_vec())];
+        for k in 0..files {
+            parts.push((
+                "files",
+                Some(["a.stl", "b.stl", "c.stl", "d.stl"][k]),
+                stl(),
+            ));
+        }
+        parts
+    };
+    assert_eq!(
+        app.upload_model(&upload(4)).await.status,
+        StatusCode::ACCEPTED
+    );
+    app.run_pending_jobs().await;
+    let dir = app.state.config.storage.models_dir.join("reused");
+    assert!(dir.join("input").is_dir());
+    assert_eq!(
+        app.request(Method::DELETE, "/v1/models/reused", &[], "")
+            .await
+            .status,
+        StatusCode::NO_CONTENT
+    );
+    // The deleted model's files go with it.
+    assert!(!dir.exists(), "{} is left behind", dir.display());
+    // A new model under the same id trains on its own two meshes, not on the four of the
+    // deleted one.
+    assert_eq!(
+        app.upload_model(&upload(2)).await.status,
+        StatusCode::ACCEPTED
+    );
+    app.run_pending_jobs().await;
+    let m = app.get("/v1/models/reused").await.json();
+    assert_eq!(
+        (m["status"].as_str(), m["training_shapes"].as_u64()),
+        (Some("ready"), Some(2)),
+        "{m}"
+    );
+    assert_eq!(std::fs::read_dir(dir.join("input")).unwrap().count(), 2);
+}
+
+#[tokio::test]
 async fn uploaded_meshes_train_a_new_model_as_a_job() {
     let app = spawn_app().await;
     let parts = [

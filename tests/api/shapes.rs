@@ -7,7 +7,7 @@ use axum::http::{Method, StatusCode};
 use serde_json::Value;
 
 use crate::engine::{CENTRE_MM, mixed_axes, uv_sphere};
-use crate::helpers::{MODEL, TestApp, cohort_body, spawn_app};
+use crate::helpers::{MODEL, TestApp, cohort_body, spawn_app, spawn_app_configured};
 
 async fn finished_cohort(app: &TestApp, count: i64) -> (i64, Vec<Value>) {
     let id = app.create_cohort_ok(&cohort_body(count, 3)).await;
@@ -201,6 +201,141 @@ async fn cohort_metrics_hold_the_pairwise_chamfer_of_the_stored_meshes() {
     let text = String::from_utf8(csv.body.to_vec()).unwrap();
     assert_eq!(text.lines().count(), 1 + 6);
     assert!(text.starts_with("shape_a,shape_b,chamfer\n"));
+}
+
+/// Every stored mesh of a cohort in shape-index order.
+async fn cohort_meshes(app: &TestApp, cohort: i64) -> Vec<aortagen::geometry::TriMesh> {
+    let blobs: Vec<Vec<u8>> = sqlx::query_scalar(
+        "select b.bytes from shape s join blob b on b.sha256 = s.mesh_sha256
+             where s.cohort_id = $1 order by s.shape_index",
+    )
+    .bind(cohort)
+    .fetch_all(&app.state.pool)
+    .await
+    .unwrap();
+    blobs
+        .iter()
+        .map(|b| mesh_blob::decode(b).unwrap())
+        .collect()
+}
+
+/// Metrics tasks of a cohort's job, done or not.
+async fn metrics_tasks(app: &TestApp, cohort: i64) -> i64 {
+    sqlx::query_scalar(
+        "select count(*) from task t join cohort c on c.job_id = t.job_id
+         where c.cohort_id = $1 and t.kind = 'metrics'",
+    )
+    .bind(cohort)
+    .fetch_one(&app.state.pool)
+    .await
+    .unwrap()
+}
+
+#[tokio::test]
+async fn metrics_split_over_several_tasks_assemble_every_pair_of_the_matrix() {
+    // 30 shapes: 435 pairs, more than one task's share.
+    let app = spawn_app().await;
+    let (id, _) = finished_cohort(&app, 30).await;
+    assert_eq!(metrics_tasks(&app, id).await, 2);
+    let m = app
+        .get(&format!("/v1/cohorts/{id}/metrics?matrix=true"))
+        .await
+        .json();
+    let summary = &m["summary"];
+    assert_eq!(
+        (
+            &summary["pairs"],
+            &summary["population_pairs"],
+            &summary["sampled"]
+        ),
+        (
+            &serde_json::json!(435),
+            &serde_json::json!(435),
+            &serde_json::json!(false)
+        )
+    );
+    assert!(summary["mean_ci95"].is_null() && summary["median_ci95"].is_null());
+    let meshes = cohort_meshes(&app, id).await;
+    let mut sum = 0.0;
+    for i in 0..30 {
+        assert_eq!(m["matrix"][i][i], 0.0);
+        for j in i + 1..30 {
+            let expected = chamfer_distance(&meshes[i].positions, &meshes[j].positions);
+            let got = m["matrix"][i][j].as_f64().unwrap();
+            assert!(
+                (got - expected).abs() <= 1e-12 * expected.max(1.0),
+                "({i}, {j})"
+            );
+            assert_eq!(m["matrix"][j][i].as_f64(), Some(got));
+            sum += expected;
+        }
+    }
+    let mean = summary["mean"].as_f64().unwrap();
+    assert!((mean - sum / 435.0).abs() <= 1e-9 * mean);
+    // The parts' pairs are assembled and removed.
+    assert_eq!(app.count("cohort_pair").await, 0);
+}
+
+#[tokio::test]
+async fn a_large_cohort_summarises_a_seeded_sample_of_its_pairs_with_intervals() {
+    // 110 shapes: 5 995 pairs, of which a sample of 4 950 is computed.
+    let app = spawn_app_configured(|c| c.max_count = 110).await;
+    let (id, _) = finished_cohort(&app, 110).await;
+    assert_eq!(metrics_tasks(&app, id).await, 13);
+    let m = app
+        .get(&format!("/v1/cohorts/{id}/metrics?matrix=true"))
+        .await
+        .json();
+    let summary = &m["summary"];
+    assert_eq!(summary["pairs"], 4950);
+    assert_eq!(summary["population_pairs"], 5995);
+    assert_eq!(summary["sampled"], true);
+    let meshes = cohort_meshes(&app, id).await;
+    let (mut sampled, mut all) = (Vec::new(), Vec::new());
+    for i in 0..110 {
+        for j in i + 1..110 {
+            let exact = chamfer_distance(&meshes[i].positions, &meshes[j].positions);
+            all.push(exact);
+            if let Some(got) = m["matrix"][i][j].as_f64() {
+                assert!((got - exact).abs() <= 1e-12 * exact.max(1.0), "({i}, {j})");
+                sampled.push(got);
+            } else {
+                assert!(m["matrix"][j][i].is_null());
+            }
+        }
+    }
+    assert_eq!(sampled.len(), 4950);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!((summary["mean"].as_f64().unwrap() - mean(&sampled)).abs() <= 1e-9 * mean(&sampled));
+    // The interval is around the sample mean and holds the mean over every pair.
+    let ci: Vec<f64> = serde_json::from_value(summary["mean_ci95"].clone()).unwrap();
+    assert!(ci[0] < mean(&sampled) && mean(&sampled) < ci[1], "{ci:?}");
+    assert!(
+        ci[0] <= mean(&all) && mean(&all) <= ci[1],
+        "{ci:?} vs {}",
+        mean(&all)
+    );
+    let median: Vec<f64> = serde_json::from_value(summary["median_ci95"].clone()).unwrap();
+    assert!(median[0] <= summary["quantiles"]["p50"].as_f64().unwrap());
+    assert!(median[1] >= summary["quantiles"]["p50"].as_f64().unwrap());
+
+    // The pair list holds the sample; the cohort's view carries the same summary.
+    let csv = app
+        .get(&format!("/v1/cohorts/{id}/metrics?format=csv"))
+        .await;
+    assert_eq!(String::from_utf8_lossy(&csv.body).lines().count(), 1 + 4950);
+    let view = app.get(&format!("/v1/cohorts/{id}")).await.json();
+    assert_eq!(view["summary"]["pairwise_chamfer"], *summary);
+
+    // The same request draws the same pairs.
+    let again = app.create_cohort_ok(&cohort_body(110, 3)).await;
+    app.run_pending_jobs().await;
+    let a = app
+        .get(&format!("/v1/cohorts/{again}/metrics?matrix=true"))
+        .await
+        .json();
+    assert_eq!(a["matrix"], m["matrix"]);
+    assert_eq!(a["summary"], m["summary"]);
 }
 
 #[tokio::test]

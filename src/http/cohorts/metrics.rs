@@ -17,10 +17,13 @@ use crate::http::AppState;
 use crate::http::error::{ApiError, Problem, Result};
 use crate::http::extractors::{ApiQuery, parse_id};
 use crate::http::rendering::render_off_executor;
-use crate::jobs::stats::{PairwiseSummary, ValueSummary, summarize_values};
+use crate::jobs::stats::{PairDistances, PairwiseSummary, ValueSummary, summarize_values};
 
 /// The metrics endpoint's formats, the default first.
 pub const METRICS_FORMATS: [&str; 2] = ["json", "csv"];
+
+/// Largest cohort whose matrix is served (its JSON grows as the square of the shapes).
+const MATRIX_MAX_SHAPES: usize = 2_000;
 
 /// Options of the metrics endpoint.
 #[derive(Debug, Deserialize, utoipa::IntoParams)]
@@ -28,7 +31,9 @@ pub const METRICS_FORMATS: [&str; 2] = ["json", "csv"];
 pub struct MetricsQuery {
     /// `json` (default) or `csv`.
     pub format: Option<String>,
-    /// Include the full matrix (JSON) or return it instead of the pair list (CSV).
+    /// Include the full matrix (JSON) or return it instead of the pair list (CSV); for a
+    /// sampled cohort, pairs outside the sample are null (JSON) or empty (CSV). Served up to
+    /// 2 000 shapes.
     pub matrix: Option<bool>,
 }
 
@@ -41,11 +46,13 @@ pub struct CohortMetrics {
     pub measure: &'static str,
     /// Shape ids in matrix order.
     pub shape_ids: Vec<i64>,
-    /// Statistics over distinct pairs (null for a single shape).
+    /// Statistics over distinct pairs (null for a single shape): every pair up to 100
+    /// shapes, a uniform random sample of 4 950 pairs beyond (`sampled`, with confidence
+    /// intervals).
     pub summary: Option<PairwiseSummary>,
-    /// The symmetric matrix, when `matrix=true`.
+    /// The symmetric matrix, when `matrix=true`; null where a pair is outside the sample.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub matrix: Option<Vec<Vec<f64>>>,
+    pub matrix: Option<Vec<Vec<Option<f64>>>>,
     /// When it was computed.
     pub computed_at: String,
     /// Distances of the shapes to their nearest training shapes.
@@ -158,17 +165,26 @@ pub(super) async fn get_cohort_metrics(
         None => 0,
     };
     let with_matrix = q.matrix.unwrap_or(false);
-    // The matrix is n × n: parsed and written out off the executor.
+    if with_matrix && shape_ids.len() > MATRIX_MAX_SHAPES {
+        return Err(ApiError::BadRequest {
+            field: Some("matrix".into()),
+            message: format!(
+                "the matrix is served for cohorts of at most {MATRIX_MAX_SHAPES} shapes, this one \
+                 has {}; the pair list (without matrix=true) holds every computed pair",
+                shape_ids.len()
+            ),
+        });
+    }
+    // The distances can be n × n: parsed and written out off the executor.
     render_off_executor(move || {
-        let matrix: Vec<Vec<f64>> =
+        let distances: PairDistances =
             serde_json::from_str(&row.matrix).map_err(anyhow::Error::from)?;
-        let summary: Option<PairwiseSummary> =
-            serde_json::from_str(&row.summary).map_err(anyhow::Error::from)?;
+        let summary = PairwiseSummary::from_stored(&row.summary).map_err(anyhow::Error::from)?;
         if csv {
             let body = if with_matrix {
-                matrix_csv(&shape_ids, &matrix)
+                matrix_csv(&shape_ids, &distances.matrix())
             } else {
-                pairs_csv(&shape_ids, &matrix)
+                pairs_csv(&shape_ids, &distances.pairs())
             };
             return Ok(([(header::CONTENT_TYPE, "text/csv; charset=utf-8")], body).into_response());
         }
@@ -177,7 +193,7 @@ pub(super) async fn get_cohort_metrics(
             measure: MEASURE,
             shape_ids,
             summary,
-            matrix: with_matrix.then_some(matrix),
+            matrix: with_matrix.then(|| distances.matrix()),
             computed_at: row.created_at,
             novelty: novelty_metrics(&cohort, &science, training_shapes),
             anatomy: anatomy_metrics(&science, cohort.targets.as_ref().map(|t| &t.0)),
@@ -259,17 +275,15 @@ fn anatomy_metrics(
     }
 }
 
-fn pairs_csv(ids: &[i64], m: &[Vec<f64>]) -> String {
+fn pairs_csv(ids: &[i64], pairs: &[(u32, u32, f64)]) -> String {
     let mut out = String::from("shape_a,shape_b,chamfer\n");
-    for i in 0..m.len() {
-        for j in i + 1..m.len() {
-            let _ = writeln!(out, "{},{},{}", ids[i], ids[j], m[i][j]);
-        }
+    for &(i, j, d) in pairs {
+        let _ = writeln!(out, "{},{},{d}", ids[i as usize], ids[j as usize]);
     }
     out
 }
 
-fn matrix_csv(ids: &[i64], m: &[Vec<f64>]) -> String {
+fn matrix_csv(ids: &[i64], m: &[Vec<Option<f64>>]) -> String {
     let mut out = String::from("shape");
     for id in ids {
         let _ = write!(out, ",{id}");
@@ -278,7 +292,12 @@ fn matrix_csv(ids: &[i64], m: &[Vec<f64>]) -> String {
     for (id, row) in ids.iter().zip(m) {
         let _ = write!(out, "{id}");
         for v in row {
-            let _ = write!(out, ",{v}");
+            match v {
+                Some(v) => {
+                    let _ = write!(out, ",{v}");
+                }
+                None => out.push(','),
+            }
         }
         out.push('\n');
     }

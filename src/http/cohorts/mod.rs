@@ -262,7 +262,8 @@ async fn get_cohort(
     let cohort = load(&state, parse_id("cohort", &id)?, &id).await?;
     let measures = db::shapes::measure_summary(&state.pool, cohort.cohort_id).await?;
     let pairwise = match db::cohort_metrics::get(&state.pool, cohort.cohort_id).await? {
-        Some(m) => serde_json::from_str(&m.summary).map_err(anyhow::Error::from)?,
+        Some(m) => crate::jobs::stats::PairwiseSummary::from_stored(&m.summary)
+            .map_err(anyhow::Error::from)?,
         None => None,
     };
     let mut view = CohortView::from_row(cohort);
