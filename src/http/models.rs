@@ -146,7 +146,8 @@ async fn list_model_shapes(
     Ok(Json(shapes.into_iter().map(Into::into).collect()))
 }
 
-/// Unregisters a model (its files stay on disk). Refused while cohorts use it.
+/// Unregisters a model and removes the files the service made for it (an uploaded model's
+/// directory; the bundled model's stays). Refused while cohorts use it.
 #[utoipa::path(delete, path = "/v1/models/{id}", tag = "models",
     params(("id" = String, Path, description = "Model id")),
     responses((status = 204, description = "Deleted"),

@@ -30,6 +30,8 @@ WORKERS = 4
 LEASE_SECS = 2
 MIN_FAULTS = int(os.environ.get("FAULT_MIN_FAULTS", "10"))
 MAX_FAULTS = MIN_FAULTS + 6
+# Faults kept for the pairwise-metrics step (its tasks run once every shape is stored).
+METRICS_FAULTS = 4
 REQUEST = {"model_id": "default", "count": COUNT, "arity": 2, "weighting": "dirichlet",
            "seed": 20261205, "resolution": RESOLUTION}
 
@@ -126,11 +128,14 @@ def distributed_run(binary, models, pg_url, workdir):
         if time.time() - started > 1800:
             sys.exit("the cohort did not finish within 30 minutes")
         time.sleep(rng.uniform(0.3, 2.5))
-        # Faults at a steady random rate until MAX_FAULTS; then the run is left to finish.
-        # (The cohort's last step, the pairwise metrics, is one task: a worker killed
-        # --max-attempts times in a row during it fails the cohort.)
-        if sum(faults.values()) >= MAX_FAULTS or rng.random() < 0.85:
+        # Faults at a steady random rate until MAX_FAULTS, and METRICS_FAULTS more once the
+        # shapes are stored and the metrics tasks run; then the run is left to finish.
+        in_metrics = c["progress"]["done"] >= COUNT
+        budget = MAX_FAULTS + (METRICS_FAULTS if in_metrics else 0)
+        if faults["kill"] + faults["stop"] >= budget or rng.random() < 0.85:
             continue
+        if in_metrics:
+            faults["during metrics"] = faults.get("during metrics", 0) + 1
         victim = rng.randrange(WORKERS)
         if rng.random() < 0.5:
             workers[victim].kill()
@@ -148,6 +153,7 @@ def distributed_run(binary, models, pg_url, workdir):
             workers[victim].send_signal(signal.SIGCONT)
     elapsed = time.time() - started
     c = cohort_status(base, cohort)
+    metrics = cohort_metrics(base, cohort) if c["status"] == "succeeded" else None
     log(f"cohort {c['status']} after {elapsed:.0f} s with {faults}")
     for w in workers:
         w.send_signal(signal.SIGTERM)
@@ -156,8 +162,15 @@ def distributed_run(binary, models, pg_url, workdir):
     api.send_signal(signal.SIGTERM)
     api.wait(timeout=30)
     assert c["status"] == "succeeded", c
-    assert sum(faults.values()) >= MIN_FAULTS, faults
-    return cohort, faults, elapsed, procs.logs
+    assert faults["kill"] + faults["stop"] >= MIN_FAULTS, faults
+    return cohort, faults, elapsed, procs.logs, metrics
+
+
+def cohort_metrics(base, cohort):
+    status, body = http("GET", f"{base}/v1/cohorts/{cohort}/metrics?matrix=true")
+    assert status == 200, body
+    m = json.loads(body)
+    return {"summary": m["summary"], "matrix": m["matrix"]}
 
 
 def reference_run(binary, models, workdir):
@@ -175,11 +188,12 @@ def reference_run(binary, models, workdir):
     while cohort_status(base, cohort)["status"] not in ("succeeded", "failed", "cancelled"):
         time.sleep(0.5)
     assert cohort_status(base, cohort)["status"] == "succeeded"
+    metrics = cohort_metrics(base, cohort)
     api.send_signal(signal.SIGTERM)
     api.wait(timeout=30)
     with sqlite3.connect(db) as conn:
         return dict(conn.execute(
-            "select shape_index, mesh_sha256 from shape where cohort_id = ?", (cohort,)))
+            "select shape_index, mesh_sha256 from shape where cohort_id = ?", (cohort,))), metrics
 
 
 def stored_mesh(pg_url, sha):
@@ -214,7 +228,7 @@ def fetch_object(store, sha):
 
 def main():
     binary, models, pg_url, workdir = sys.argv[1:5]
-    cohort, faults, elapsed, logs = distributed_run(binary, models, pg_url, workdir)
+    cohort, faults, elapsed, logs, metrics = distributed_run(binary, models, pg_url, workdir)
     rows = psql(pg_url, f"select shape_index, mesh_sha256 from shape where cohort_id = {cohort} "
                         "order by shape_index").splitlines()
     shapes = {int(i): sha for i, sha in (r.split("|") for r in rows)}
@@ -236,13 +250,18 @@ def main():
     assert fetched >= 1, "no worker fetched the model by its digest"
     log(f"{COUNT} shapes, one per index; every object present with its SHA-256; "
         f"{late} late commits or renewals refused")
-    reference = reference_run(binary, models + ".api", workdir)
+    reference, reference_metrics = reference_run(binary, models + ".api", workdir)
     differing = [i for i in range(COUNT) if reference.get(i) != shapes[i]]
     assert not differing, f"meshes differ from the single-process run at {differing[:10]}"
-    log(f"every mesh byte-identical to the single-process SQLite run")
+    summary = metrics["summary"]
+    assert metrics == reference_metrics, \
+        "the pairwise metrics differ from the single-process run"
+    log(f"every mesh byte-identical to the single-process SQLite run; the pairwise metrics "
+        f"({summary['pairs']} of {summary['population_pairs']} pairs) identical too")
     print(json.dumps({"shapes": COUNT, "resolution": RESOLUTION, "workers": WORKERS,
                       "faults": faults, "seconds": round(elapsed, 1),
-                      "late_refused": late, "model_fetches": fetched}))
+                      "late_refused": late, "model_fetches": fetched,
+                      "pairs": summary["pairs"], "population_pairs": summary["population_pairs"]}))
 
 
 if __name__ == "__main__":
