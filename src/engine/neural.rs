@@ -489,7 +489,11 @@ mod tests {
     #[test]
     fn a_reference_built_from_stored_surfaces_is_kept_for_its_model_and_resolution() {
         let engine = SdfEngine::new(Backend::default()).with_chamfer_points(200);
-        let dir = Path::new("models/some-model");
+        let models = tempfile::tempdir().unwrap();
+        let model_dir = models.path().join("some-model");
+        std::fs::create_dir(&model_dir).unwrap();
+        std::fs::write(model_dir.join("weights.bin"), b"weights").unwrap();
+        let dir = model_dir.as_path();
         assert!(engine.cached_novelty_reference(dir, 64).is_none());
         let surfaces = [
             uv_sphere(1.0, [0.0; 3], 8, 12),
@@ -503,6 +507,15 @@ mod tests {
             engine
                 .cached_novelty_reference(Path::new("models/other"), 64)
                 .is_none()
+        );
+        // Rewritten weights under the same path are another model: the old reference is not served.
+        std::fs::write(model_dir.join("weights.bin"), b"retrained weights").unwrap();
+        assert!(engine.cached_novelty_reference(dir, 64).is_none());
+        // A directory that cannot be read is an error, never a panic.
+        assert!(
+            engine
+                .novelty_reference_from(&models.path().join("missing"), 64, &surfaces)
+                .is_err()
         );
     }
 }
