@@ -142,11 +142,14 @@ pub struct Config {
     #[arg(long, env = "AORTAGEN_MAX_JSON_BYTES", default_value_t = 1024 * 1024)]
     pub max_json_bytes: usize,
 
-    /// Largest work of one cohort, `count × resolution³` voxels; larger requests get 422.
+    /// Largest work of one cohort in field-evaluation voxels, `(count × draws per shape +
+    /// training shapes first reconstructed at this resolution) × resolution³`; larger
+    /// requests get 422. The default holds 100 shapes at 256³ on a model of 100 training
+    /// shapes asked at that resolution for the first time.
     #[arg(
         long,
         env = "AORTAGEN_MAX_COHORT_VOXELS",
-        default_value_t = 2_000_000_000
+        default_value_t = 4_000_000_000
     )]
     pub max_cohort_voxels: u64,
 
@@ -250,7 +253,8 @@ mod tests {
     #[test]
     fn default_limits_allow_100_shapes_at_256() {
         let config = Config::with_database("sqlite::memory:", "127.0.0.1:0");
-        assert!(100 * 256u64.pow(3) <= config.max_cohort_voxels);
+        // 100 drawn shapes plus the first reconstruction of 100 training shapes.
+        assert!((100 + 100) * 256u64.pow(3) <= config.max_cohort_voxels);
         assert_eq!(config.max_json_bytes, 1024 * 1024);
         assert_eq!(config.max_in_flight, 512);
     }

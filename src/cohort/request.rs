@@ -160,12 +160,13 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
             check_convex_only(&fields)?;
         }
         let resolution = check_resolution(fields.resolution)?;
-        check_budget(count, resolution, limits.max_voxels)?;
         let weighting = fields.weighting.unwrap_or_default();
         let weights = WeightChoice::new(fields.weights, weighting, arity)?;
         let latent_noise = non_negative("latent_noise", fields.latent_noise)?.unwrap_or(0.0);
         let min_novelty = non_negative("min_novelty", fields.min_novelty)?;
         let targets = target_search(fields.targets, fields.max_candidates)?;
+        let draws = draws_per_shape(targets.as_ref(), min_novelty);
+        check_budget(count, draws, 0, resolution, limits.max_voxels)?;
         let anchors = fields
             .anchors
             .map(|a| check_anchors(a, arity))
@@ -207,14 +208,31 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
         Ok(())
     }
 
-    /// Draws per shape at most: candidates with targets, redraws with a minimum novelty,
-    /// one otherwise.
-    pub fn draws_per_shape(&self) -> u32 {
-        match (&self.targets, self.min_novelty) {
-            (Some(t), _) => t.max_candidates,
-            (None, Some(_)) => super::MAX_REDRAWS + 1,
-            (None, None) => 1,
-        }
+    /// The work budget with the setup this request needs on its model: `setup_shapes`
+    /// training shapes not yet reconstructed at the request's resolution (each one field
+    /// evaluation like a draw).
+    pub fn check_budget_with_setup(
+        &self,
+        setup_shapes: usize,
+        max_voxels: u64,
+    ) -> Result<(), RequestError> {
+        check_budget(
+            self.count,
+            draws_per_shape(self.targets.as_ref(), self.min_novelty),
+            setup_shapes as u64,
+            self.resolution,
+            max_voxels,
+        )
+    }
+}
+
+/// Draws per shape at most: candidates with targets, redraws with a minimum novelty, one
+/// otherwise.
+fn draws_per_shape(targets: Option<&TargetSearch>, min_novelty: Option<f64>) -> u32 {
+    match (targets, min_novelty) {
+        (Some(t), _) => t.max_candidates,
+        (None, Some(_)) => super::MAX_REDRAWS + 1,
+        (None, None) => 1,
     }
 }
 
@@ -288,19 +306,57 @@ fn check_resolution(resolution: Option<i64>) -> Result<usize, RequestError> {
     }
 }
 
-/// The work budget `count × resolution³`, named on `count`.
-fn check_budget(count: u32, resolution: usize, max_voxels: u64) -> Result<(), RequestError> {
+/// The work budget: the field evaluations a cohort may cost, `(count × draws per shape +
+/// setup shapes) × resolution³` voxels, named on `count`. Draws per shape are the worst
+/// case (every candidate of a targeted shape, every redraw of a novelty minimum); setup
+/// shapes are the model's training shapes reconstructed at a resolution for the first time.
+/// (The pairwise step is bounded on its own: at most 4 950 pairs whatever the count.)
+fn check_budget(
+    count: u32,
+    draws: u32,
+    setup_shapes: u64,
+    resolution: usize,
+    max_voxels: u64,
+) -> Result<(), RequestError> {
     let cube = (resolution as u64).pow(3);
-    let voxels = u64::from(count).saturating_mul(cube);
-    if voxels > max_voxels {
-        let most = max_voxels / cube;
-        let msg = format!(
-            "count × resolution³ must not exceed {max_voxels} voxels, got {count} × \
-             {resolution}³ = {voxels}; at resolution {resolution} at most {most} shapes"
-        );
-        return Err(RequestError::new("count", "budget", msg));
+    let draws_total = u64::from(count).saturating_mul(u64::from(draws.max(1)));
+    let voxels = draws_total
+        .saturating_add(setup_shapes)
+        .saturating_mul(cube);
+    if voxels <= max_voxels {
+        return Ok(());
     }
-    Ok(())
+    let fields = max_voxels / cube;
+    let plural = if setup_shapes == 1 { "" } else { "s" };
+    if setup_shapes > 0 && setup_shapes >= fields {
+        let msg = format!(
+            "the model's {setup_shapes} training shape{plural} must first be reconstructed at resolution \
+             {resolution} before any draw: {setup_shapes} × {resolution}³ = {} voxels, which \
+             leaves no room in the budget of {max_voxels} voxels; ask a lower resolution (a \
+             cohort at a resolution reuses the reconstructions) or raise \
+             --max-cohort-voxels",
+            setup_shapes.saturating_mul(cube)
+        );
+        return Err(RequestError::new("resolution", "budget", msg));
+    }
+    let most = (fields - setup_shapes) / u64::from(draws.max(1));
+    let mut terms = format!("{count}");
+    if draws > 1 {
+        terms.push_str(&format!(
+            " shapes × {draws} draws a shape (the most a novelty minimum or a target search may take)"
+        ));
+    }
+    if setup_shapes > 0 {
+        terms = format!(
+            "({terms} + {setup_shapes} training shape{plural} first reconstructed at this \
+             resolution)"
+        );
+    }
+    let msg = format!(
+        "a cohort's field evaluations must not exceed {max_voxels} voxels, got {terms} × \
+         {resolution}³ = {voxels}; at resolution {resolution} at most {most} shapes"
+    );
+    Err(RequestError::new("count", "budget", msg))
 }
 
 fn non_negative(field: &str, value: Option<f64>) -> Result<Option<f64>, RequestError> {
@@ -388,7 +444,7 @@ mod tests {
         assert_eq!(r.weights, WeightChoice::Dirichlet);
         assert_eq!((r.selection, r.latent_noise), (Selection::Uniform, 0.0));
         assert!(r.targets.is_none() && r.anchors.is_empty() && r.min_novelty.is_none());
-        assert_eq!(r.draws_per_shape(), 1);
+        assert_eq!(draws_per_shape(r.targets.as_ref(), r.min_novelty), 1);
     }
 
     #[test]
@@ -500,6 +556,45 @@ mod tests {
     }
 
     #[test]
+    fn the_budget_counts_every_draw_a_shape_may_take_and_the_setup() {
+        // 3 shapes at 64³ fill the test budget of 3 × 64³ voxels exactly.
+        let plain = CohortFields {
+            resolution: Some(64),
+            ..fields()
+        };
+        let r = parse(plain.clone()).unwrap();
+        // A novelty minimum may take 11 draws a shape: 33 fields.
+        let err = parse(CohortFields {
+            min_novelty: Some(0.01),
+            ..plain.clone()
+        })
+        .unwrap_err();
+        assert_eq!((err.field.as_str(), err.rule), ("count", "budget"));
+        assert!(err.message.contains("11 draws a shape"), "{}", err.message);
+        // At 32³ the budget holds 24 fields: 2 shapes of 11 draws.
+        let err = parse(CohortFields {
+            min_novelty: Some(0.01),
+            resolution: Some(32),
+            ..plain.clone()
+        })
+        .unwrap_err();
+        assert!(err.message.contains("at most 2 shapes"), "{}", err.message);
+        // Training shapes first reconstructed at the resolution count as well.
+        assert!(r.check_budget_with_setup(0, 3 * 64u64.pow(3)).is_ok());
+        let err = r.check_budget_with_setup(1, 3 * 64u64.pow(3)).unwrap_err();
+        assert!(
+            err.message.contains("1 training shape first"),
+            "{}",
+            err.message
+        );
+        assert!(err.message.contains("at most 2 shapes"), "{}", err.message);
+        // When the setup alone fills the budget no count fits: the resolution is at fault.
+        let err = r.check_budget_with_setup(3, 3 * 64u64.pow(3)).unwrap_err();
+        assert_eq!((err.field.as_str(), err.rule), ("resolution", "budget"));
+        assert!(err.message.contains("3 training shapes"), "{}", err.message);
+    }
+
+    #[test]
     fn targets_bring_their_candidate_bound() {
         let mut ranges = BTreeMap::new();
         ranges.insert(
@@ -509,8 +604,10 @@ mod tests {
                 max: None,
             },
         );
+        // One shape of 20 candidates at 32³ fits the test budget of 3 × 64³ voxels.
         let f = CohortFields {
-            resolution: Some(64),
+            count: 1,
+            resolution: Some(32),
             targets: Some(ranges),
             ..fields()
         };
@@ -519,7 +616,10 @@ mod tests {
             r.targets.as_ref().unwrap().max_candidates,
             DEFAULT_MAX_CANDIDATES
         );
-        assert_eq!(r.draws_per_shape(), DEFAULT_MAX_CANDIDATES);
+        assert_eq!(
+            draws_per_shape(r.targets.as_ref(), r.min_novelty),
+            DEFAULT_MAX_CANDIDATES
+        );
         let r = parse(CohortFields {
             max_candidates: Some(7),
             ..f

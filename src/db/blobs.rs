@@ -30,14 +30,16 @@ pub async fn exists(pool: &super::Pool, sha256: &str) -> sqlx::Result<bool> {
     Ok(n > 0)
 }
 
-/// Deletes the objects no shape, model or training/fit job (its inputs) names that were written before `before` (RFC 3339, the
-/// grace period's start): objects whose rows were deleted, or whose writer died before its
+/// Deletes the objects no shape, model, reference population or training/fit job (its
+/// inputs) names that were written before `before` (RFC 3339, the grace period's start): objects whose rows were deleted, or whose writer died before its
 /// row. Returns how many.
 pub async fn sweep_unreferenced(pool: &super::Pool, before: &str) -> sqlx::Result<u64> {
     Ok(sqlx::query(
         "delete from blob where created_at < $1
              and not exists (select 1 from shape s where s.mesh_sha256 = blob.sha256)
              and not exists (select 1 from model m where m.digest = blob.sha256)
+             and not exists (select 1 from reference_population r
+                                 where r.object_sha256 = blob.sha256)
              and not exists (select 1 from job j where j.kind <> 'cohort'
                                  and j.payload like '%' || blob.sha256 || '%')",
     )
@@ -48,11 +50,13 @@ pub async fn sweep_unreferenced(pool: &super::Pool, before: &str) -> sqlx::Resul
 }
 
 /// The names of every object a row refers to (what a sweep of an external store keeps):
-/// meshes, model bundles, and the inputs training and fit jobs name in their payloads.
+/// meshes, model bundles, reference populations, and the inputs training and fit jobs name
+/// in their payloads.
 pub async fn referenced(pool: &super::Pool) -> sqlx::Result<Vec<String>> {
     let mut names: Vec<String> = sqlx::query_scalar(
         "select distinct mesh_sha256 from shape
-         union select distinct digest from model where digest is not null",
+         union select distinct digest from model where digest is not null
+         union select distinct object_sha256 from reference_population",
     )
     .fetch_all(pool)
     .await?;

@@ -15,6 +15,10 @@ pub enum IdKind {
     Shape,
     /// `anchor.anchor_id`.
     Anchor,
+    /// `reference_population.reference_id`.
+    Reference,
+    /// `validation.validation_id`.
+    Validation,
 }
 
 /// The allocating statement for one table: one above both the mark and the table's largest
@@ -43,6 +47,10 @@ impl IdKind {
             Self::Cohort => allocate_sql!("cohort", "cohort", "cohort_id"),
             Self::Shape => allocate_sql!("shape", "shape", "shape_id"),
             Self::Anchor => allocate_sql!("anchor", "anchor", "anchor_id"),
+            Self::Reference => {
+                allocate_sql!("reference", "reference_population", "reference_id")
+            }
+            Self::Validation => allocate_sql!("validation", "validation", "validation_id"),
         }
     }
 }

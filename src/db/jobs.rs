@@ -156,6 +156,24 @@ pub async fn set_progress(conn: &mut super::Conn, job_id: i64, done: i64) -> sql
     Ok(())
 }
 
+/// Sets a job's units of work once a worker knows them (a validation counts its Chamfer
+/// distances only when it has read its populations).
+pub async fn set_progress_total(
+    conn: &mut super::Conn,
+    job_id: i64,
+    total: i64,
+) -> sqlx::Result<()> {
+    sqlx::query(
+        "update job set progress_total = $1, updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')
+         where job_id = $2",
+    )
+    .bind(total)
+    .bind(job_id)
+    .execute(conn)
+    .await?;
+    Ok(())
+}
+
 /// Flags a queued or running job for cancellation (inside the caller's transaction, which
 /// then settles it); returns its status, or None when there is no such job.
 pub async fn request_cancel(

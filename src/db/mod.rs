@@ -11,11 +11,13 @@ pub mod job_changes;
 pub mod jobs;
 pub mod models;
 pub mod novelty_surfaces;
+pub mod references;
 pub mod shapes;
 pub mod simulations;
 pub mod states;
 pub mod tasks;
 pub mod thumbnails;
+pub mod validations;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -88,6 +88,8 @@ column_enum! {
         Training = "training",
         /// Fits a latent to a new mesh (an anchor).
         Fit = "fit",
+        /// Validate a cohort against a reference population.
+        Validation = "validation",
     }
 }
 
@@ -122,6 +124,8 @@ column_enum! {
         Training = "training",
         /// A whole fit.
         Fit = "fit",
+        /// A whole validation.
+        Validation = "validation",
     }
 }
 

@@ -508,7 +508,7 @@ async fn one_file(
     unpacked.files.pop().ok_or_else(|| file_count_error("0"))
 }
 
-fn check_name(name: &str) -> Result<()> {
+pub(super) fn check_name(name: &str) -> Result<()> {
     let ok = (1..=64).contains(&name.len())
         && name
             .bytes()

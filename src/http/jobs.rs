@@ -56,6 +56,7 @@ impl From<JobRow> for JobView {
             Ok(Job::Cohort(p)) => Some(format!("/v1/cohorts/{}", p.cohort_id)),
             Ok(Job::Training(p)) => Some(format!("/v1/models/{}", p.model_id)),
             Ok(Job::Fit(p)) => Some(format!("/v1/anchors/{}", p.anchor_id)),
+            Ok(Job::Validation(p)) => Some(format!("/v1/validations/{}", p.validation_id)),
             Err(_) => None,
         };
         Self {

@@ -26,6 +26,7 @@ pub mod shapes;
 pub mod simulation_meshes;
 pub mod thumbnails;
 pub mod upload_archive;
+pub mod validations;
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -83,6 +84,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(cohort_meshes::router())
         .merge(jobs::router())
         .merge(reports::router())
+        .merge(validations::router())
         .merge(thumbnails::router())
         .merge(events::router())
         .merge(dashboard::router())

@@ -342,7 +342,7 @@ pub(super) fn validate_mesh(field: &str, name: &str, bytes: &[u8]) -> Result<Mes
 }
 
 /// The mesh format a file name's extension names, else the one its bytes announce.
-fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
+pub(super) fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
     std::path::Path::new(name)
         .extension()
         .and_then(|e| e.to_str())

@@ -29,6 +29,7 @@ use super::AppState;
         (name = "anchors", description = "New shapes fitted to a trained model (latent optimisation with the network frozen)"),
         (name = "jobs", description = "Background work"),
         (name = "reports", description = "Plots (SVG) and self-contained HTML reports of models and cohorts"),
+        (name = "validation", description = "Reference populations of real patients and the validation of cohorts against them (shape and measurement level, acceptance criteria, credibility dossier)"),
         (name = "operations", description = "Health, metrics and documentation"),
     ),
     // Enumerations that query parameters name by `value_type`; the routers collect only

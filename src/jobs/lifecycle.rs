@@ -54,7 +54,7 @@ pub async fn finish_job(
             let reason = error.unwrap_or("cancelled");
             db::anchors::set_failed(conn, p.anchor_id, reason).await?;
         }
-        Ok(Job::Cohort(_)) | Err(_) => {}
+        Ok(Job::Cohort(_) | Job::Validation(_)) | Err(_) => {}
     }
     Ok(true)
 }
@@ -100,6 +100,7 @@ pub async fn plan(pool: &db::Pool, job_id: i64) -> anyhow::Result<()> {
         Ok(Job::Cohort(p)) => cohort::plan(pool, &p).await,
         Ok(Job::Training(_)) => Ok(vec![NewTask::whole(TaskKind::Training)]),
         Ok(Job::Fit(_)) => Ok(vec![NewTask::whole(TaskKind::Fit)]),
+        Ok(Job::Validation(_)) => Ok(vec![NewTask::whole(TaskKind::Validation)]),
         Err(e) => Err(anyhow::anyhow!("bad job payload: {e}")),
     };
     let mut tx = db::begin_write(pool).await?;

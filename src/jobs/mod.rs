@@ -14,6 +14,7 @@ pub mod setup;
 pub mod simulation;
 pub mod stats;
 pub mod training;
+pub mod validation;
 pub mod worker;
 
 use std::collections::HashMap;
@@ -46,6 +47,8 @@ pub enum Job {
     Training(training::TrainingPayload),
     /// Fit a latent to a new mesh.
     Fit(fit::FitPayload),
+    /// Validate a cohort against a reference population.
+    Validation(validation::ValidationPayload),
 }
 
 impl Job {
@@ -55,6 +58,7 @@ impl Job {
             Self::Cohort(_) => JobKind::Cohort,
             Self::Training(_) => JobKind::Training,
             Self::Fit(_) => JobKind::Fit,
+            Self::Validation(_) => JobKind::Validation,
         }
     }
 
@@ -64,6 +68,7 @@ impl Job {
             Self::Cohort(p) => serde_json::to_string(p),
             Self::Training(p) => serde_json::to_string(p),
             Self::Fit(p) => serde_json::to_string(p),
+            Self::Validation(p) => serde_json::to_string(p),
         };
         json.expect("payloads serialise")
     }
@@ -74,6 +79,7 @@ impl Job {
             JobKind::Cohort => Self::Cohort(serde_json::from_str(payload)?),
             JobKind::Training => Self::Training(serde_json::from_str(payload)?),
             JobKind::Fit => Self::Fit(serde_json::from_str(payload)?),
+            JobKind::Validation => Self::Validation(serde_json::from_str(payload)?),
         })
     }
 }
@@ -507,6 +513,7 @@ async fn run_task(ctx: &JobContext, run: &TaskRun) -> Result<(), JobError> {
         (Job::Cohort(p), TaskKind::Metrics) => cohort::metrics(ctx, run, p).await,
         (Job::Training(p), TaskKind::Training) => training::run(ctx, run, p).await,
         (Job::Fit(p), TaskKind::Fit) => fit::run(ctx, run, p).await,
+        (Job::Validation(p), TaskKind::Validation) => validation::run(ctx, run, p).await,
         (_, kind) => Err(JobError::Failed(anyhow!(
             "a {} job has no {kind} task",
             row.kind

@@ -202,7 +202,15 @@ async fn form_posts_from_another_site_reach_no_state_changing_route_without_keys
         .unwrap();
     let counts = async || {
         let mut counts = Vec::new();
-        for table in ["model", "job", "cohort", "shape", "anchor"] {
+        for table in [
+            "model",
+            "job",
+            "cohort",
+            "shape",
+            "anchor",
+            "reference_population",
+            "validation",
+        ] {
             counts.push(app.count(table).await);
         }
         counts
@@ -257,11 +265,18 @@ async fn form_posts_from_another_site_reach_no_state_changing_route_without_keys
             checked += 1;
         }
     }
-    assert_eq!(checked, 9, "the documented state-changing operations");
+    assert_eq!(checked, 13, "the documented state-changing operations");
     // Uploads take multipart bodies from clients that are not browsers (curl -F): a form
     // with neither Origin nor Sec-Fetch-Site is theirs, which no current browser sends.
     takes_forms.sort();
-    assert_eq!(takes_forms, ["post /v1/models", "post /v1/models/{id}/fit"]);
+    assert_eq!(
+        takes_forms,
+        [
+            "post /v1/models",
+            "post /v1/models/{id}/fit",
+            "post /v1/models/{id}/references"
+        ]
+    );
     assert_eq!(counts().await, before, "nothing was created or deleted");
     assert_eq!(status_of(&app, cohort).await, "queued");
 }

@@ -87,11 +87,17 @@ fn sigterm_mid_cohort_exits_cleanly_and_the_cohort_resumes() {
     assert!(status.is_some_and(|s| s.success()), "{log}");
 }
 
-/// A shape too large to finish within the grace period: the process still exits 0 within
-/// 10 s, abandoning the shape, and the job is back in the queue.
+/// Work too large to finish within the grace period (at 1024³ the model's training surfaces
+/// come first, then the shape): the process still exits 0 within 10 s, abandoning the task,
+/// and the job is back in the queue.
 #[test]
 fn sigterm_during_a_long_shape_exits_within_the_grace_period() {
     let mut dir = ServiceDir::new();
+    // The bundled model's 16 training surfaces at 1024³ and the shape: 17 fields.
+    dir.env.push((
+        "AORTAGEN_MAX_COHORT_VOXELS".into(),
+        (17 * 1024u64.pow(3)).to_string(),
+    ));
     let server = dir.start(1);
     let body = json!({ "model_id": "default", "count": 1, "arity": 2,
                        "seed": 9, "resolution": 1024 });

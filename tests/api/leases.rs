@@ -301,3 +301,78 @@ async fn start_up_frees_the_leases_of_dead_local_processes_only() {
         assert_eq!(expired, owner == dead, "{owner}");
     }
 }
+
+/// Claims a task as this process's worker would and then never records its end, as when
+/// the final write fails for a reason other than storage or the run dies past every guard.
+async fn abandon_a_task(app: &TestApp, lease_ms: i64) -> tasks::Lease {
+    let pool = &app.state.pool;
+    let lease = tasks::claim(pool, &app.state.jobs.owner, "abandoned", lease_ms)
+        .await
+        .unwrap()
+        .expect("a task is queued");
+    let mut conn = pool.acquire().await.unwrap();
+    db::jobs::start(&mut conn, lease.job_id).await.unwrap();
+    lease
+}
+
+/// Runs this process's queue housekeeping and work until `done` holds, for at most 5 s.
+async fn drive_until(app: &TestApp, ctx: &JobContext, done: impl AsyncFn(&TestApp) -> bool) {
+    for _ in 0..500 {
+        if done(app).await {
+            return;
+        }
+        try_execute_job(ctx).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    panic!("not reached within 5 s");
+}
+
+#[tokio::test]
+async fn a_task_whose_end_was_never_recorded_stays_cancellable_and_is_taken_over() {
+    let app = spawn_app().await;
+    let ctx = other_process(&app, &app.state.jobs.owner, short_leases(1000));
+    let status = async |app: &TestApp, cohort: i64| {
+        app.get(&format!("/v1/cohorts/{cohort}")).await.json()["status"]
+            .as_str()
+            .unwrap()
+            .to_owned()
+    };
+
+    // Cancelled while the dead lease lasts: requested at once, settled when it runs out,
+    // and the job leaves the queue bound.
+    let cancelled = app.create_cohort_ok(&cohort_body(1, 2)).await;
+    let lease = abandon_a_task(&app, 100).await;
+    assert_eq!(lease.job_id, job_id(&app, cancelled).await);
+    let path = format!("/v1/cohorts/{cancelled}/cancel");
+    let r = app.request(Method::POST, &path, &[], "").await;
+    assert_eq!(r.status, StatusCode::ACCEPTED);
+    assert_eq!(r.json()["status"], "running");
+    drive_until(&app, &ctx, async |app| {
+        status(app, cancelled).await == "cancelled"
+    })
+    .await;
+    assert_eq!(tasks::live_leases(&app.state.pool).await.unwrap(), 0);
+    let pending: i64 =
+        sqlx::query_scalar("select count(*) from job where status in ('queued', 'running')")
+            .fetch_one(&app.state.pool)
+            .await
+            .unwrap();
+    assert_eq!(pending, 0);
+
+    // Left alone: the task is taken over once its lease runs out and the cohort finishes.
+    let finished = app.create_cohort_ok(&cohort_body(2, 2)).await;
+    let lease = abandon_a_task(&app, 100).await;
+    drive_until(&app, &ctx, async |app| {
+        status(app, finished).await == "succeeded"
+    })
+    .await;
+    let (task_status, attempts): (String, i64) =
+        sqlx::query_as("select status, attempts from task where task_id = $1")
+            .bind(lease.task_id)
+            .fetch_one(&app.state.pool)
+            .await
+            .unwrap();
+    assert_eq!((task_status.as_str(), attempts), ("done", 2));
+    let view = app.get(&format!("/v1/cohorts/{finished}")).await.json();
+    assert_eq!(view["progress"]["done"], 2, "{view}");
+}

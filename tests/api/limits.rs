@@ -8,7 +8,7 @@ use serde_json::json;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::TcpStream;
 
-use crate::helpers::{MODEL, TestApp, cohort_body, spawn_app, spawn_app_configured};
+use crate::helpers::{MODEL, TestApp, TestResponse, cohort_body, spawn_app, spawn_app_configured};
 
 /// Opens a connection and sends a POST whose body stops short of its Content-Length, so
 /// the handler waits for the rest while the connection stays open.
@@ -102,8 +102,9 @@ async fn requests_beyond_the_in_flight_bound_get_503_with_retry_after() {
 #[tokio::test]
 async fn a_cohort_over_the_work_budget_is_422_naming_count() {
     let app = spawn_app().await;
-    // 2 × 1024³ ≈ 2.15e9 voxels exceeds the default budget of 2e9.
-    let body = json!({ "model_id": MODEL, "count": 2, "arity": 2, "resolution": 1024 });
+    // The default budget of 4e9 voxels holds 29 fields at 512³; the model's 5 training
+    // shapes take 5 of them the first time: 40 shapes do not fit, 24 do.
+    let body = json!({ "model_id": MODEL, "count": 40, "arity": 2, "resolution": 512 });
     let r = app.create_cohort(&body).await;
     assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
     let p = r.json();
@@ -111,10 +112,52 @@ async fn a_cohort_over_the_work_budget_is_422_naming_count() {
         (p["field"].as_str(), p["rule"].as_str()),
         (Some("count"), Some("budget"))
     );
-    assert!(p["detail"].as_str().unwrap().contains("resolution³"), "{p}");
+    let detail = p["detail"].as_str().unwrap();
+    assert!(detail.contains("512³"), "{p}");
+    assert!(detail.contains("at most 24 shapes"), "{p}");
     assert_eq!(app.count("cohort").await, 0);
+    let fits = json!({ "model_id": MODEL, "count": 24, "arity": 2, "resolution": 512 });
+    assert_eq!(app.create_cohort(&fits).await.status, StatusCode::ACCEPTED);
+}
+
+#[tokio::test]
+async fn the_work_budget_counts_every_draw_and_the_models_first_reconstructions() {
+    let app = spawn_app().await;
+    let problem = |r: TestResponse, field: &str| {
+        assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+        let p = r.json();
+        assert_eq!(
+            (p["field"].as_str(), p["rule"].as_str()),
+            (Some(field), Some("budget"))
+        );
+        p["detail"].as_str().unwrap().to_owned()
+    };
+    // One shape at 1024³ is one field of 1.07e9 voxels, but the model's 5 training shapes
+    // are first reconstructed at that resolution for novelty: 6 fields, 6.4e9 voxels. The
+    // setup alone fills the budget, so no count fits and the resolution is named.
     let one = json!({ "model_id": MODEL, "count": 1, "arity": 2, "resolution": 1024 });
-    assert_eq!(app.create_cohort(&one).await.status, StatusCode::ACCEPTED);
+    let detail = problem(app.create_cohort(&one).await, "resolution");
+    assert!(detail.contains("5 training shapes"), "{detail}");
+    // 100 shapes at 256³ pass; with a novelty minimum each may take 11 draws: refused,
+    // naming the draws and the most shapes that fit.
+    let plain = json!({ "model_id": MODEL, "count": 100, "arity": 2, "resolution": 256 });
+    let app = spawn_app_configured(|c| c.max_count = 1000).await;
+    assert_eq!(app.create_cohort(&plain).await.status, StatusCode::ACCEPTED);
+    let mut novel = plain.clone();
+    novel["min_novelty"] = json!(0.001);
+    let detail = problem(app.create_cohort(&novel).await, "count");
+    assert!(detail.contains("11 draws a shape"), "{detail}");
+    // 4e9 / 256³ = 238 fields, 5 of them setup: (238 − 5) / 11 = 21 shapes.
+    assert!(detail.contains("at most 21 shapes"), "{detail}");
+    novel["count"] = json!(21);
+    assert_eq!(app.create_cohort(&novel).await.status, StatusCode::ACCEPTED);
+    // A target search counts its candidates.
+    let mut targeted = plain.clone();
+    targeted["targets"] = json!({ "length_mm": { "min": 1.0 } });
+    targeted["max_candidates"] = json!(50);
+    let detail = problem(app.create_cohort(&targeted).await, "count");
+    assert!(detail.contains("50 draws a shape"), "{detail}");
+    assert_eq!(app.count("cohort").await, 2);
 }
 
 #[tokio::test]
@@ -122,7 +165,8 @@ async fn the_default_budget_allows_100_shapes_at_256() {
     let app = spawn_app_configured(|c| c.max_count = 1000).await;
     let body = json!({ "model_id": MODEL, "count": 100, "arity": 2, "resolution": 256 });
     assert_eq!(app.create_cohort(&body).await.status, StatusCode::ACCEPTED);
-    let over = json!({ "model_id": MODEL, "count": 120, "arity": 2, "resolution": 256 });
+    // 238 fields at 256³, 5 of them the model's first reconstructions.
+    let over = json!({ "model_id": MODEL, "count": 234, "arity": 2, "resolution": 256 });
     assert_eq!(
         app.create_cohort(&over).await.status,
         StatusCode::UNPROCESSABLE_ENTITY

@@ -32,3 +32,4 @@ mod science;
 mod shapes;
 mod simulation;
 mod storage;
+mod validations;

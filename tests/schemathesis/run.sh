@@ -33,10 +33,11 @@ BASE="http://127.0.0.1:$PORT"
 mkdir -p "$WORK/models"
 cp -r models/default "$WORK/models/default"
 
-# One worker, a queue of 4 and a budget of 4 shapes at 32³: generated cohorts stay cheap.
+# One worker, a queue of 4 and a budget of 4 shapes at 32³ beside the first reconstruction
+# of the bundled model's 16 training shapes: generated cohorts stay cheap.
 "$BIN" serve --bind "127.0.0.1:$PORT" --database "sqlite://$WORK/st.db" \
     --models-dir "$WORK/models" --workers 1 --max-queue 4 \
-    --max-cohort-voxels $((4 * 32 * 32 * 32)) --max-count 4 \
+    --max-cohort-voxels $(((4 + 16) * 32 * 32 * 32)) --max-count 4 \
     >"$WORK/server.log" 2>&1 &
 PID=$!
 cleanup() {

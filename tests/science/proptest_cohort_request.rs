@@ -15,7 +15,7 @@ use proptest::prelude::*;
 use serde_json::json;
 
 const MAX_COUNT: u32 = 500;
-/// The service's default work budget: `count × resolution³` voxels per cohort.
+/// A work budget of `count × resolution³` voxels per cohort (one draw a shape here).
 const MAX_VOXELS: u64 = 2_000_000_000;
 /// Smallest and largest accepted resolution.
 const RESOLUTIONS: (i64, i64) = (

@@ -47,7 +47,7 @@ pub(super) fn router() -> OpenApiRouter<AppState> {
         (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown model"),
         (status = 413, body = Problem, content_type = "application/problem+json", description = "Body over the JSON size limit"),
         (status = 415, body = Problem, content_type = "application/problem+json"),
-        (status = 422, body = Problem, content_type = "application/problem+json", description = "A rule is broken, e.g. `count` over the work budget `count × resolution³`, or a target the model cannot reach (rule `feasible`, naming the achievable range)"),
+        (status = 422, body = Problem, content_type = "application/problem+json", description = "A rule is broken, e.g. `count` over the work budget `(count × draws per shape + training shapes not yet reconstructed at this resolution) × resolution³`, or a target the model cannot reach (rule `feasible`, naming the achievable range)"),
         (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After"),
     ))]
 async fn create_cohort(
@@ -56,9 +56,10 @@ async fn create_cohort(
     ApiJson(body): ApiJson<CreateCohort>,
 ) -> Result<Response> {
     let key = idempotency_key(&headers)?;
+    // The work budget is checked below, once the model's missing setup is known.
     let limits = RequestLimits {
         max_count: state.config.max_count,
-        max_voxels: state.config.max_cohort_voxels,
+        max_voxels: u64::MAX,
     };
     let request = CohortRequest::parse(body.fields(), limits, rand::random::<u64>)?;
     let model = db::models::get(&state.pool, &body.model_id)
@@ -72,6 +73,12 @@ async fn create_cohort(
         }
     };
     request.check_model(info.training_shape_count())?;
+    let reconstructed =
+        db::novelty_surfaces::stored_indices(&state.pool, &model.model_id, request.resolution)
+            .await?
+            .len();
+    let setup_shapes = info.training_shape_count().saturating_sub(reconstructed);
+    request.check_budget_with_setup(setup_shapes, state.config.max_cohort_voxels)?;
     if let Some(search) = &request.targets {
         check_targets(&state, &model, info, &search.targets).await?;
     }
@@ -345,8 +352,24 @@ async fn delete_cohort(
         return Err(ApiError::Conflict(msg));
     }
     let mut tx = db::begin_write(&state.pool).await?;
+    // Its validations go with it, once none runs.
+    let validation_jobs = db::validations::job_ids_for_cohort(&mut tx, cohort.cohort_id).await?;
+    for job_id in &validation_jobs {
+        let pending = db::jobs::get(&state.pool, *job_id)
+            .await?
+            .is_some_and(|j| j.status.is_pending());
+        if pending {
+            let msg = format!(
+                "cohort {id} has a validation still running (job {job_id}); cancel it first"
+            );
+            return Err(ApiError::Conflict(msg));
+        }
+    }
     db::cohorts::delete(&mut tx, cohort.cohort_id).await?;
     db::jobs::delete(&mut tx, cohort.job_id).await?;
+    for job_id in validation_jobs {
+        db::jobs::delete(&mut tx, job_id).await?;
+    }
     tx.commit().await?;
     Ok(StatusCode::NO_CONTENT)
 }
