@@ -638,7 +638,7 @@ fn bounded(field: &str, value: Option<u64>, max: u64, default: u64) -> Result<us
               (status = 400, body = Problem, content_type = "application/problem+json", description = "Malformed JSON"),
               (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown cohort"),
               (status = 409, body = Problem, content_type = "application/problem+json", description = "The cohort has not succeeded"),
-              (status = 422, body = Problem, content_type = "application/problem+json", description = "A field breaks a rule: an unknown reference or one of another model, `heldout` for a model without a holdout, a criterion out of range (named, e.g. `criteria.nna_max`)"),
+              (status = 422, body = Problem, content_type = "application/problem+json", description = "A field breaks a rule: an unknown reference or one of another model, `heldout` for a model without a holdout, a criterion out of range (named, e.g. `criteria.nna_max`), or `points` over the work budget (Chamfer distances × points, `--max-validation-work`)"),
               (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After")))]
 async fn create_validation(
     State(state): State<AppState>,
@@ -680,8 +680,14 @@ async fn create_validation(
             cohort.status
         )));
     }
-    let (reference, reference_id) =
-        check_reference(&state, &cohort.model_id, &body.reference).await?;
+    let chosen = check_reference(&state, &cohort.model_id, &body.reference).await?;
+    check_work(
+        &chosen,
+        cohort.count as usize,
+        points,
+        state.config.max_validation_work,
+    )?;
+    let (reference, reference_id) = (chosen.stored, chosen.id);
     let settings = ValidationSettings {
         reference: reference.clone(),
         criteria,
@@ -730,19 +736,30 @@ async fn create_validation(
         .into_response())
 }
 
-/// The reference a request names, checked against the cohort's model: `(stored name,
-/// uploaded reference id)`.
+/// The reference a request names, checked against the cohort's model.
+struct ChosenReference {
+    /// `heldout`, `training`, or the uploaded reference's id as text.
+    stored: String,
+    /// The uploaded reference's id.
+    id: Option<i64>,
+    /// Its shapes with surfaces (none for a table: no shape level).
+    surfaces: usize,
+    /// The model's training and held-out set sizes, when its manifest records them.
+    own: Option<(usize, usize)>,
+}
+
 async fn check_reference(
     state: &AppState,
     model_id: &str,
     value: &serde_json::Value,
-) -> Result<(String, Option<i64>)> {
+) -> Result<ChosenReference> {
+    let model = db::models::get(&state.pool, model_id)
+        .await?
+        .ok_or_else(|| ApiError::not_found("model", model_id))?;
+    let own = own_reference_sizes(state, &model).await?;
     match value {
         serde_json::Value::String(s) if s == "training" || s == "heldout" => {
-            let model = db::models::get(&state.pool, model_id)
-                .await?
-                .ok_or_else(|| ApiError::not_found("model", model_id))?;
-            let msg = match own_reference_sizes(state, &model).await? {
+            let msg = match own {
                 None => format!(
                     "model {model_id:?} has no recorded training data; name an uploaded \
                      reference"
@@ -751,7 +768,14 @@ async fn check_reference(
                     "model {model_id:?} was trained without a holdout; name `training` or an \
                      uploaded reference"
                 ),
-                Some(_) => return Ok((s.clone(), None)),
+                Some((training, heldout)) => {
+                    return Ok(ChosenReference {
+                        stored: s.clone(),
+                        id: None,
+                        surfaces: if s == "training" { training } else { heldout },
+                        own,
+                    });
+                }
             };
             Err(ApiError::invalid("reference", "exists", msg))
         }
@@ -770,7 +794,16 @@ async fn check_reference(
                 );
                 return Err(ApiError::invalid("reference", "same-model", msg));
             }
-            Ok((id.to_string(), Some(id)))
+            let surfaces = match row.kind.as_str() {
+                "meshes" => row.shapes as usize,
+                _ => 0,
+            };
+            Ok(ChosenReference {
+                stored: id.to_string(),
+                id: Some(id),
+                surfaces,
+                own,
+            })
         }
         other => {
             let msg = format!(
@@ -779,6 +812,35 @@ async fn check_reference(
             Err(ApiError::invalid("reference", "type", msg))
         }
     }
+}
+
+/// The shape-level work budget: Chamfer distances × surface points per shape, named on
+/// `points` (the knob a user turns; a table reference has no shape level).
+fn check_work(chosen: &ChosenReference, cohort: usize, points: usize, max: u64) -> Result<()> {
+    if chosen.surfaces == 0 {
+        return Ok(());
+    }
+    let (training, heldout) = chosen.own.unwrap_or((0, 0));
+    let is_training = chosen.stored == "training";
+    let newcomers = if is_training { heldout } else { 0 };
+    let pairs = crate::validation::shapes::chamfer_pairs(
+        cohort,
+        chosen.surfaces,
+        training,
+        newcomers,
+        is_training,
+    );
+    let work = pairs.saturating_mul(points as u64);
+    if work <= max {
+        return Ok(());
+    }
+    let most = max / pairs.max(1);
+    let msg = format!(
+        "a validation's shape-level work must not exceed {max} (Chamfer distances × points), \
+         got {pairs} distances × {points} points = {work}; with this cohort and reference \
+         at most {most} points"
+    );
+    Err(ApiError::invalid("points", "budget", msg))
 }
 
 /// A cohort's validations, oldest first (without their reports).

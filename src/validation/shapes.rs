@@ -172,20 +172,39 @@ pub struct ShapeInputs<'a> {
 impl ShapeInputs<'_> {
     /// Chamfer distances the comparison computes (for progress).
     pub fn pairs(&self) -> u64 {
-        let (s, r) = (self.cohort.len() as u64, self.reference.len() as u64);
-        let t = self.training.map_or(0, |t| t.len() as u64);
         let n = match &self.newcomers {
-            Newcomers::Other(p) => p.len() as u64,
+            Newcomers::Other(p) => p.len(),
             _ => 0,
         };
-        let within = |k: u64| k * k.saturating_sub(1) / 2;
-        let baseline = if self.reference_is_training {
-            0
-        } else {
-            within(t)
-        };
-        within(s) + s * r + within(r) + r + s * t + r * t + n * t + baseline
+        chamfer_pairs(
+            self.cohort.len(),
+            self.reference.len(),
+            self.training.map_or(0, Population::len),
+            n,
+            self.reference_is_training,
+        )
     }
+}
+
+/// Chamfer distances of a shape-level comparison of `cohort` shapes with `reference` shapes,
+/// beside `training` shapes and `newcomers` (the held-out shapes when the reference is the
+/// training set): within each set, across them, and the real-vs-real baseline.
+pub fn chamfer_pairs(
+    cohort: usize,
+    reference: usize,
+    training: usize,
+    newcomers: usize,
+    reference_is_training: bool,
+) -> u64 {
+    let (s, r, t, n) = (
+        cohort as u64,
+        reference as u64,
+        training as u64,
+        newcomers as u64,
+    );
+    let within = |k: u64| k * k.saturating_sub(1) / 2;
+    let baseline = if reference_is_training { 0 } else { within(t) };
+    within(s) + s * r + within(r) + r + s * t + r * t + n * t + baseline
 }
 
 /// Runs the shape level; `progress` counts the Chamfer distances done.

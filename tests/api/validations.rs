@@ -423,6 +423,37 @@ async fn bad_references_and_validation_requests_are_named_and_store_nothing() {
         )
         .await;
     problem(&r, StatusCode::NOT_FOUND);
+
+    // The shape-level work budget: 3 cohort shapes against 3 patients are 3 + 9 + 3 + 3 = 18
+    // Chamfer distances; at 1 000 points that is 18 000.
+    let app = crate::helpers::spawn_app_configured(|c| c.max_validation_work = 17_999).await;
+    let cohort = app.create_cohort_ok(&cohort_body(3, 2)).await;
+    app.run_pending_jobs().await;
+    let parts = [
+        ("name", None, b"p".to_vec()),
+        ("files", Some("a.stl"), ellipsoid_stl(0)),
+        ("files", Some("b.stl"), ellipsoid_stl(1)),
+        ("files", Some("c.stl"), ellipsoid_stl(2)),
+    ];
+    let id = upload(&app, &parts).await.json()["id"].as_i64().unwrap();
+    let path = format!("/v1/cohorts/{cohort}/validations");
+    let r = app
+        .post_json(&path, &json!({ "reference": id, "points": 1000 }))
+        .await;
+    let (field, rule, detail) = problem(&r, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(
+        (field.as_str(), rule.as_str()),
+        ("points", "budget"),
+        "{detail}"
+    );
+    assert!(
+        detail.contains("18 distances") && detail.contains("at most 999 points"),
+        "{detail}"
+    );
+    let r = app
+        .post_json(&path, &json!({ "reference": id, "points": 999 }))
+        .await;
+    assert_eq!(r.status, StatusCode::ACCEPTED);
 }
 
 #[tokio::test(flavor = "multi_thread")]
