@@ -15,7 +15,7 @@ use crate::validation::measures::MeasureSettings;
 use crate::validation::report::ValidationReport;
 use crate::validation::shapes::DEFAULT_POINTS;
 use crate::validation::sources::{
-    ModelPopulations, model_populations, read_cohort_dir, read_reference_path,
+    ModelPopulations, mean_training_radius, model_populations, read_cohort_dir, read_reference_path,
 };
 use crate::validation::{
     AcceptanceCriteria, Dossier, Newcomers, Population, ShapeInputs, ShapeSettings, Subject,
@@ -106,7 +106,7 @@ pub fn run(args: ValidateArgs) -> anyhow::Result<()> {
         Some(s) => s,
         None => model
             .as_ref()
-            .map(|m| mean_radius(&m.manifest))
+            .map(|m| mean_training_radius(&m.manifest))
             .or_else(|| reference.mean_radius_mm())
             .context("no common scale: give --scale-mm")?,
     };
@@ -210,11 +210,6 @@ fn with_progress(input: ValidationInput<'_>) -> anyhow::Result<ValidationReport>
         bar.finish_and_clear();
     }
     report.map_err(|_| anyhow::anyhow!("the validation panicked"))
-}
-
-fn mean_radius(m: &crate::sdf::store::manifest::ModelManifest) -> f64 {
-    let t = m.transforms();
-    t.iter().map(|t| t.radius).sum::<f64>() / t.len().max(1) as f64
 }
 
 /// The reference population, its dossier entry and the table columns not compared (name,

@@ -331,6 +331,15 @@ fn validate_meshes(files: &[(String, Vec<u8>)]) -> Result<Vec<MeshFormat>> {
 /// sniffing has no extension (or an unknown one) that a reader could go by. A failure is a
 /// 422 on `field` naming the reason.
 pub(super) fn validate_mesh(field: &str, name: &str, bytes: &[u8]) -> Result<MeshFormat> {
+    read_valid_mesh(field, name, bytes).map(|(format, _)| format)
+}
+
+/// [`validate_mesh`], keeping the mesh it read.
+pub(super) fn read_valid_mesh(
+    field: &str,
+    name: &str,
+    bytes: &[u8],
+) -> Result<(MeshFormat, TriMesh)> {
     let format = mesh_format(name, bytes).ok_or_else(|| {
         ApiError::invalid(field, "format", format!("{name}: unknown mesh format"))
     })?;
@@ -338,11 +347,11 @@ pub(super) fn validate_mesh(field: &str, name: &str, bytes: &[u8]) -> Result<Mes
         .map_err(|e| ApiError::invalid(field, "mesh", e.to_string()))?;
     mesh.validate()
         .map_err(|e| ApiError::invalid(field, "mesh", format!("{name}: {e}")))?;
-    Ok(format)
+    Ok((format, mesh))
 }
 
 /// The mesh format a file name's extension names, else the one its bytes announce.
-pub(super) fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
+fn mesh_format(name: &str, bytes: &[u8]) -> Option<MeshFormat> {
     std::path::Path::new(name)
         .extension()
         .and_then(|e| e.to_str())

@@ -23,7 +23,7 @@ use super::AppState;
 use super::anchors::check_name;
 use super::error::{ApiError, Problem, Result};
 use super::extractors::{ApiJson, ApiQuery, parse_id};
-use super::model_upload::{body_error, is_zip_body, mesh_format, unpack_blocking};
+use super::model_upload::{body_error, is_zip_body, read_valid_mesh, unpack_blocking};
 use super::upload_archive::{ArchiveLimits, Unpacked, looks_like_zip};
 use crate::db::states::{JobStatus, ModelStatus};
 use crate::db::{self, references::ReferenceRow, validations::ValidationRow};
@@ -384,14 +384,7 @@ fn check_meshes(files: Vec<(String, Vec<u8>)>) -> Result<ReferenceContent> {
     }
     let mut meshes = Vec::with_capacity(files.len());
     for (i, (name, bytes)) in files.into_iter().enumerate() {
-        let field = format!("files[{name}]");
-        let format = mesh_format(&name, &bytes).ok_or_else(|| {
-            ApiError::invalid(&field, "format", format!("{name}: unknown mesh format"))
-        })?;
-        let mesh = crate::formats::read_mesh_bytes(&bytes, format, &name)
-            .map_err(|e| ApiError::invalid(&field, "mesh", e.to_string()))?;
-        mesh.validate()
-            .map_err(|e| ApiError::invalid(&field, "mesh", format!("{name}: {e}")))?;
+        let (_, mesh) = read_valid_mesh(&format!("files[{name}]"), &name, &bytes)?;
         let base = name.rsplit('/').next().unwrap_or(&name);
         meshes.push((
             format!("{i:04}-{base}"),

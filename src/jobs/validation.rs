@@ -16,7 +16,7 @@ use crate::sdf::store::manifest::ModelManifest;
 use crate::stats::bootstrap::{BandTestConfig, Discount};
 use crate::validation::features::FeatureValues;
 use crate::validation::measures::MeasureSettings;
-use crate::validation::sources::{ModelPopulations, model_populations};
+use crate::validation::sources::{ModelPopulations, mean_training_radius, model_populations};
 use crate::validation::table::parse_table;
 use crate::validation::{
     AcceptanceCriteria, Dossier, Member, Newcomers, Population, ShapeInputs, ShapeSettings,
@@ -165,7 +165,7 @@ pub(super) async fn run(
     let scale_mm = compared
         .manifest
         .as_ref()
-        .map(mean_radius)
+        .map(mean_training_radius)
         .or_else(|| compared.reference.mean_radius_mm())
         .or_else(|| cohort_population.mean_radius_mm())
         .unwrap_or(1.0);
@@ -309,7 +309,10 @@ fn compared_populations(
                 Ok(m) => (Some(m), None),
                 Err(e) => (None, Some(format!("not available: {e:#}"))),
             };
-            let manifest = crate::sdf::store::read_manifest(model_dir).ok();
+            let manifest = match &model {
+                Some(m) => Some(m.manifest.clone()),
+                None => crate::sdf::store::read_manifest(model_dir).ok(),
+            };
             Ok(Compared {
                 reference_subject: subject(
                     &reference,
@@ -373,18 +376,13 @@ fn uploaded_population(
 }
 
 /// A stored member's name without the ordering prefix (`0003-patient.stl` → `patient.stl`).
-pub fn display_name(stored: &str) -> &str {
+fn display_name(stored: &str) -> &str {
     match stored.split_once('-') {
         Some((index, rest)) if index.len() == 4 && index.bytes().all(|b| b.is_ascii_digit()) => {
             rest
         }
         _ => stored,
     }
-}
-
-fn mean_radius(m: &crate::sdf::store::manifest::ModelManifest) -> f64 {
-    let t = m.transforms();
-    t.iter().map(|t| t.radius).sum::<f64>() / t.len().max(1) as f64
 }
 
 #[cfg(test)]

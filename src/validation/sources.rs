@@ -138,6 +138,12 @@ pub fn meshes_sha256(meshes: &[(String, crate::geometry::TriMesh)]) -> String {
     crate::digest::sha256_hex(&bytes)
 }
 
+/// The model's mean training radius in mm: the common scale of its shape-level distances.
+pub fn mean_training_radius(manifest: &ModelManifest) -> f64 {
+    let t = manifest.transforms();
+    t.iter().map(|t| t.radius).sum::<f64>() / t.len().max(1) as f64
+}
+
 /// A model's own populations.
 #[derive(Debug, Clone)]
 pub struct ModelPopulations {
