@@ -13,7 +13,7 @@ use super::progress::{init_logging, terminal_bar};
 use crate::stats::bootstrap::{BandTestConfig, DEFAULT_DISCOUNT, DEFAULT_RESAMPLES, Discount};
 use crate::validation::measures::MeasureSettings;
 use crate::validation::report::ValidationReport;
-use crate::validation::shapes::DEFAULT_POINTS;
+use crate::validation::shapes::{DEFAULT_POINTS, Progress};
 use crate::validation::sources::{
     ModelPopulations, mean_training_radius, model_populations, read_cohort_dir, read_reference_path,
 };
@@ -187,7 +187,7 @@ fn with_progress(input: ValidationInput<'_>) -> anyhow::Result<ValidationReport>
     let bar = terminal_bar(total, "Chamfer distances");
     let report = std::thread::scope(|scope| {
         let work = scope.spawn(|| {
-            let report = validate(input, &done);
+            let report = validate(input, Progress::counting(&done));
             finished.store(true, Ordering::SeqCst);
             report
         });

@@ -16,6 +16,7 @@ use crate::sdf::store::manifest::ModelManifest;
 use crate::stats::bootstrap::{BandTestConfig, Discount};
 use crate::validation::features::FeatureValues;
 use crate::validation::measures::MeasureSettings;
+use crate::validation::shapes::Progress;
 use crate::validation::sources::{ModelPopulations, mean_training_radius, model_populations};
 use crate::validation::table::parse_table;
 use crate::validation::{
@@ -198,6 +199,7 @@ pub(super) async fn run(
         let mut conn = ctx.pool.acquire().await?;
         db::jobs::set_progress_total(&mut conn, run.lease.job_id, total as i64).await?;
     }
+    let stop = run.flag.clone();
     let report = run_with_progress(ctx, run, PROGRESS_INTERVAL, move |done| {
         let input = ValidationInput {
             shapes: compared.shape_inputs(&cohort_population, reference_is_training),
@@ -219,7 +221,13 @@ pub(super) async fn run(
             ignored,
             dossier,
         };
-        Ok(validate(input, done))
+        Ok(validate(
+            input,
+            Progress {
+                done,
+                stop: Some(&stop),
+            },
+        ))
     })
     .await?;
     stopped(&run.flag)?;

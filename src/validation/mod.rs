@@ -29,7 +29,7 @@ pub use criteria::{AcceptanceCriteria, Criteria, Verdict};
 pub use features::Feature;
 pub use population::{Member, Population};
 pub use report::{Dossier, Subject, ValidationInput, ValidationReport, validate};
-pub use shapes::{Newcomers, ShapeInputs, ShapeSettings};
+pub use shapes::{Newcomers, Progress, ShapeInputs, ShapeSettings};
 
 /// A broken rule of a validation's input (a request field, a table column or row); the
 /// service answers it as 422 problem+json naming `field`.

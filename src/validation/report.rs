@@ -6,7 +6,6 @@
 //! ([`crate::report::validation`]).
 
 use std::collections::BTreeMap;
-use std::sync::atomic::AtomicU64;
 
 use serde::{Deserialize, Serialize};
 
@@ -16,7 +15,7 @@ use super::measures::{
     FeatureComparison, JointComparison, MeasureSettings, compare_feature, compare_jointly,
 };
 use super::population::Population;
-use super::shapes::{ShapeInputs, ShapeLevel, ShapeSettings, compare_shapes};
+use super::shapes::{Progress, ShapeInputs, ShapeLevel, ShapeSettings, compare_shapes};
 
 /// Value of the report's `format` field.
 pub const REPORT_FORMAT: &str = "aortagen-validation";
@@ -106,8 +105,8 @@ pub struct ValidationInput<'a> {
 }
 
 /// Runs a validation; `progress` counts the Chamfer distances done (see
-/// [`ShapeInputs::pairs`]).
-pub fn validate(input: ValidationInput<'_>, progress: &AtomicU64) -> ValidationReport {
+/// [`ShapeInputs::pairs`]) and may stop them (the shape level is then not computed).
+pub fn validate(input: ValidationInput<'_>, progress: Progress<'_>) -> ValidationReport {
     let (cohort, reference) = (input.shapes.cohort, input.shapes.reference);
     let mut not_computed = BTreeMap::new();
     let shapes = compare_shapes(&input.shapes, &input.shape_settings, progress);

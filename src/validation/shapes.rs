@@ -11,7 +11,7 @@
 //! lengths in units of `scale_mm`, comparable to the service's unit-ball figures.
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use rand::SeedableRng;
 use rand::seq::index::sample;
@@ -207,11 +207,38 @@ pub fn chamfer_pairs(
     within(s) + s * r + within(r) + r + s * t + r * t + n * t + baseline
 }
 
-/// Runs the shape level; `progress` counts the Chamfer distances done.
+/// The running count of Chamfer distances and the request to give up on them.
+#[derive(Debug, Clone, Copy)]
+pub struct Progress<'a> {
+    /// Chamfer distances done.
+    pub done: &'a AtomicU64,
+    /// Raised when the result is no longer wanted (a cancelled job, a lost lease): the
+    /// remaining distances are skipped and the shape level is not computed.
+    pub stop: Option<&'a AtomicBool>,
+}
+
+impl<'a> Progress<'a> {
+    /// Counting into `done`, never stopped.
+    pub fn counting(done: &'a AtomicU64) -> Self {
+        Self { done, stop: None }
+    }
+
+    /// Whether the stop flag is up.
+    pub fn stopped(&self) -> bool {
+        self.stop.is_some_and(|s| s.load(Ordering::Relaxed))
+    }
+
+    fn step(&self) {
+        self.done.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// Runs the shape level; `progress` counts the Chamfer distances done, and a raised stop
+/// flag ends it early without a result.
 pub fn compare_shapes(
     inputs: &ShapeInputs<'_>,
     settings: &ShapeSettings,
-    progress: &AtomicU64,
+    progress: Progress<'_>,
 ) -> Result<ShapeLevel, String> {
     for (what, p) in [("cohort", inputs.cohort), ("reference", inputs.reference)] {
         if !p.has_surfaces() {
@@ -267,6 +294,9 @@ pub fn compare_shapes(
             note("baseline", e);
         }
     }
+    if progress.stopped() {
+        return Err("stopped before every Chamfer distance was computed".into());
+    }
     (level.nna, level.coverage, level.pairwise) = (nna, coverage, pairwise);
     Ok(level)
 }
@@ -281,7 +311,7 @@ fn training_comparisons(
     r: &[ChamferIndex],
     rr: &DistanceMatrix,
     settings: &ShapeSettings,
-    progress: &AtomicU64,
+    progress: Progress<'_>,
 ) -> Result<(Result<(Dcr, String), String>, Result<Baseline, String>), String> {
     let t = sample_population(training, settings, 3)?;
     let st = cross(s, &t, progress);
@@ -475,13 +505,13 @@ fn sample_population(
 }
 
 /// Median over the reference of the distance between two samplings of the same surface.
-fn sampling_floor(reference: &Population, settings: &ShapeSettings, progress: &AtomicU64) -> f64 {
+fn sampling_floor(reference: &Population, settings: &ShapeSettings, progress: Progress<'_>) -> f64 {
     let floors: Vec<f64> = reference
         .members
         .par_iter()
         .enumerate()
         .map(|(i, m)| {
-            let Some(mesh) = m.surface_mm.as_ref() else {
+            let Some(mesh) = m.surface_mm.as_ref().filter(|_| !progress.stopped()) else {
                 return 0.0;
             };
             let points = |stream| {
@@ -494,7 +524,7 @@ fn sampling_floor(reference: &Population, settings: &ShapeSettings, progress: &A
                 ))
             };
             let d = chamfer_between_serial(&points(5), &points(6));
-            progress.fetch_add(1, Ordering::Relaxed);
+            progress.step();
             d
         })
         .collect();
@@ -502,12 +532,15 @@ fn sampling_floor(reference: &Population, settings: &ShapeSettings, progress: &A
 }
 
 /// Distances from every set of `a` to every set of `b`.
-fn cross(a: &[ChamferIndex], b: &[ChamferIndex], progress: &AtomicU64) -> DistanceMatrix {
+fn cross(a: &[ChamferIndex], b: &[ChamferIndex], progress: Progress<'_>) -> DistanceMatrix {
     let values: Vec<f64> = (0..a.len() * b.len())
         .into_par_iter()
         .map(|k| {
+            if progress.stopped() {
+                return 0.0;
+            }
             let d = chamfer_between_serial(&a[k / b.len()], &b[k % b.len()]);
-            progress.fetch_add(1, Ordering::Relaxed);
+            progress.step();
             d
         })
         .collect();
@@ -516,7 +549,7 @@ fn cross(a: &[ChamferIndex], b: &[ChamferIndex], progress: &AtomicU64) -> Distan
 }
 
 /// The symmetric matrix of distances within `a` (zero diagonal).
-fn within(a: &[ChamferIndex], progress: &AtomicU64) -> DistanceMatrix {
+fn within(a: &[ChamferIndex], progress: Progress<'_>) -> DistanceMatrix {
     let n = a.len();
     let pairs: Vec<(usize, usize)> = (0..n)
         .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
@@ -524,8 +557,11 @@ fn within(a: &[ChamferIndex], progress: &AtomicU64) -> DistanceMatrix {
     let values: Vec<f64> = pairs
         .par_iter()
         .map(|&(i, j)| {
+            if progress.stopped() {
+                return 0.0;
+            }
             let d = chamfer_between_serial(&a[i], &a[j]);
-            progress.fetch_add(1, Ordering::Relaxed);
+            progress.step();
             d
         })
         .collect();

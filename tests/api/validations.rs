@@ -532,3 +532,79 @@ async fn the_bundled_models_training_shapes_are_a_reference_under_the_models_has
     let total = view["progress"]["total"].as_i64().unwrap();
     assert!(total > 0 && view["progress"]["done"] == total, "{view}");
 }
+
+#[tokio::test]
+async fn a_validation_cancelled_during_its_chamfer_distances_stops_there() {
+    let app = spawn_app().await;
+    let (cohort, _) = finished_cohort(&app, 4).await;
+    let parts: Vec<(&str, Option<&str>, Vec<u8>)> = vec![
+        ("name", None, b"patients".to_vec()),
+        ("files", Some("p0.stl"), ellipsoid_stl(0)),
+        ("files", Some("p1.stl"), ellipsoid_stl(2)),
+        ("files", Some("p2.stl"), ellipsoid_stl(4)),
+    ];
+    let r = upload(&app, &parts).await;
+    assert_eq!(r.status, StatusCode::CREATED);
+    let reference = r.json()["id"].as_i64().unwrap();
+    // Many points per shape: each distance takes a while, so the cancel lands among them.
+    let r = app
+        .post_json(
+            &format!("/v1/cohorts/{cohort}/validations"),
+            &json!({ "reference": reference, "points": 100_000, "subsets": 10, "resamples": 50 }),
+        )
+        .await;
+    assert_eq!(
+        r.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    let validation = r.json();
+    let path = format!("/v1/validations/{}", validation["id"]);
+    let (worker, stop) = crate::jobs::spawn_worker(&app);
+    let mut seen = Value::Null;
+    for _ in 0..6000 {
+        seen = app.get(&path).await.json();
+        if seen["progress"]["done"].as_i64().unwrap_or(0) > 0 {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+    let total = seen["progress"]["total"].as_i64().unwrap();
+    assert!(seen["progress"]["done"].as_i64().unwrap() > 0, "{seen}");
+    let r = app
+        .request(
+            Method::POST,
+            &format!("/v1/jobs/{}/cancel", validation["job_id"]),
+            &[],
+            "",
+        )
+        .await;
+    assert_eq!(
+        r.status,
+        StatusCode::ACCEPTED,
+        "{}",
+        String::from_utf8_lossy(&r.body)
+    );
+    for _ in 0..6000 {
+        seen = app.get(&path).await.json();
+        if seen["status"] == "cancelled" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+    }
+    assert_eq!(seen["status"], "cancelled", "{seen}");
+    assert!(
+        seen["report"].is_null() && seen["verdict"].is_null(),
+        "{seen}"
+    );
+    stop.send(true).unwrap();
+    worker.await.unwrap();
+    let done = app.get(&path).await.json()["progress"]["done"]
+        .as_i64()
+        .unwrap();
+    assert!(
+        done < total,
+        "every one of the {total} distances was computed after the cancel"
+    );
+}

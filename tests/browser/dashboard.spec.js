@@ -1,7 +1,8 @@
 // Drives the dashboard in the system's headless Chromium (playwright-core, no downloaded
 // browser): creates a small cohort through the form and watches it reach 100 % without a
 // reload, opens a shape in the viewer and checks the WebGL canvas drew it, overlays a second
-// shape, downloads a GLB and checks its header, shows a validation error beside its field,
+// shape, downloads a GLB and checks its header, validates the cohort against the model's
+// training shapes and reads its verdict and report, shows a validation error beside its field,
 // checks keyboard reach and a narrow window, and fails on any unexpected console error.
 // Screenshots of the main pages go to SCREENSHOT_DIR.
 //
@@ -182,6 +183,34 @@ await step("a GLB download is binary glTF version 2", async () => {
   assert.equal(bytes.subarray(0, 4).toString("latin1"), "glTF");
   assert.equal(bytes.readUInt32LE(4), 2);
   assert.equal(bytes.readUInt32LE(8), bytes.length, "header length = file length");
+});
+
+await step("a validation against the model's training shapes reaches its verdict on the cohort page", async () => {
+  const form = page.locator("#validation-form");
+  await form.waitFor();
+  const options = await page.$$eval("#validation-reference option", (os) => os.map((o) => o.value));
+  assert.ok(options.includes("training"), `references offered: ${options}`);
+  await page.selectOption("#validation-reference", "training");
+  expected.push({ pattern: /status of 422/, seen: false });
+  await page.fill("#validation-points", "200000");
+  await form.getByRole("button", { name: "Validate" }).click();
+  await page.locator("#validations .error", { hasText: /^points: / }).waitFor();
+  assert.equal(await page.getAttribute("#validation-points", "aria-invalid"), "true");
+  assert.equal(await page.locator("#validation-list").count(), 0, "a rejected request made a validation");
+  await page.fill("#validation-points", "300");
+  await page.fill("#validation-criteria", '{"nna_max": 1.0}');
+  await form.getByRole("button", { name: "Validate" }).click();
+  const row = page.locator("#validation-list tbody tr").first();
+  await row.locator(".badge.pass").waitFor({ timeout: 180000 });
+  assert.match(await row.locator("td").first().textContent(), /training \(16 shapes\)/);
+  await row.locator("td").first().click();
+  await page.locator("#validation-checks li", { hasText: /nna_max/ }).waitFor();
+  const report = row.getByRole("link", { name: "report" });
+  assert.match(await report.getAttribute("href"), /^\/v1\/validations\/\d+\/report\.html$/);
+  const html = await (await page.request.get(`${base}${await report.getAttribute("href")}`)).text();
+  assert.match(html, /1-NNA/);
+  await page.locator("#validation-checks").scrollIntoViewIfNeeded();
+  await screenshot(page, "validation");
 });
 
 await step("the viewer draws the shape in the middle of its canvas", async () => {

@@ -67,6 +67,19 @@ for _ in $(seq 1 300); do
 done
 JOB=$(curl -fsS "$BASE/v1/cohorts/$COHORT" | json 'd["job_id"]')
 SHAPE=$(curl -fsS "$BASE/v1/cohorts/$COHORT/shapes" | json 'd["items"][0]["id"]')
+# A measurements-table reference and a finished validation of the cohort against it, so the
+# validation operations are also reached with ids that exist.
+printf 'patient_id;area_mm2;volume_mm3\np1;1000;2000\np2;1100;2100\np3;1200;2300\n' >"$WORK/ref.csv"
+REFERENCE=$(curl -fsS -X POST "$BASE/v1/models/default/references" -F name=st \
+    -F "table=@$WORK/ref.csv;filename=ref.csv" | json 'd["id"]')
+VALIDATION=$(curl -fsS -X POST "$BASE/v1/cohorts/$COHORT/validations" \
+    -H 'content-type: application/json' -d "{\"reference\":$REFERENCE}" | json 'd["id"]')
+for _ in $(seq 1 120); do
+    state=$(curl -fsS "$BASE/v1/validations/$VALIDATION" | json 'd["status"]')
+    [ "$state" = succeeded ] && break
+    [ "$state" = failed ] && { echo "seed validation failed" >&2; exit 1; }
+    sleep 1
+done
 block() {
     printf '[[operations]]\ninclude-path-regex = "%s"\nparameters = { "path.id" = %s }\n\n' "$1" "$2"
 }
@@ -76,6 +89,8 @@ block() {
     block '^/v1/jobs/[{]id[}]$' "$JOB"
     block '^/v1/shapes/[{]id[}]' "$SHAPE"
     block '^/v1/models/[{]id[}]' '"default"'
+    block '^/v1/references/[{]id[}]' "$REFERENCE"
+    block '^/v1/validations/[{]id[}]' "$VALIDATION"
 } >"$WORK/known.toml"
 CHECKS=not_a_server_error,response_schema_conformance,status_code_conformance,content_type_conformance
 REPORT="${ST_REPORT_DIR:-$ROOT/target/schemathesis}"
@@ -108,5 +123,5 @@ if ! kill -0 "$PID" 2>/dev/null; then
     tail -50 "$WORK/server.log" >&2
     exit 1
 fi
-echo "cohort $COHORT, shape $SHAPE, job $JOB; reports in $REPORT"
+echo "cohort $COHORT, shape $SHAPE, job $JOB, reference $REFERENCE, validation $VALIDATION; reports in $REPORT"
 exit "$STATUS"

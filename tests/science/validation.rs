@@ -5,7 +5,7 @@
 //! at the sampling floor and is flagged. Also the command line on directories and on a
 //! SIMCor-style table.
 
-use std::sync::atomic::AtomicU64;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use aortagen::anatomy::measurement::Measurement;
 use aortagen::geometry::TriMesh;
@@ -13,8 +13,8 @@ use aortagen::stats::bootstrap::{BandTestConfig, Discount};
 use aortagen::synth::{build_root, params_for};
 use aortagen::validation::measures::MeasureSettings;
 use aortagen::validation::{
-    AcceptanceCriteria, Dossier, Feature, Newcomers, Population, ShapeInputs, ShapeSettings,
-    ValidationInput, ValidationReport, Verdict, validate,
+    AcceptanceCriteria, Dossier, Feature, Newcomers, Population, Progress, ShapeInputs,
+    ShapeSettings, ValidationInput, ValidationReport, Verdict, validate,
 };
 
 /// Shapes per parametric draw: enough for KS to see a 3 mm shift of a 9 mm-wide uniform
@@ -49,6 +49,23 @@ fn run(
     training: Option<&Population>,
     criteria: AcceptanceCriteria,
 ) -> ValidationReport {
+    run_counting(
+        cohort,
+        reference,
+        training,
+        criteria,
+        Progress::counting(&AtomicU64::new(0)),
+    )
+}
+
+/// [`run`] reporting to `progress`.
+fn run_counting(
+    cohort: &Population,
+    reference: &Population,
+    training: Option<&Population>,
+    criteria: AcceptanceCriteria,
+    progress: Progress<'_>,
+) -> ValidationReport {
     let criteria = criteria.check().unwrap();
     let input = ValidationInput {
         shapes: ShapeInputs {
@@ -76,7 +93,7 @@ fn run(
         ignored: Vec::new(),
         dossier: Dossier::default(),
     };
-    validate(input, &AtomicU64::new(0))
+    validate(input, progress)
 }
 
 fn feature(r: &ValidationReport, f: Feature) -> &aortagen::validation::measures::FeatureComparison {
@@ -191,4 +208,38 @@ fn copies_of_the_training_shapes_sit_at_the_sampling_floor_and_are_flagged() {
         "copies are told apart only by sampling noise: {}",
         nna.mean
     );
+}
+
+#[test]
+fn a_raised_stop_flag_skips_the_chamfer_distances_and_says_so() {
+    let cohort = population("cohort", 41, 6, 0.0);
+    let reference = population("reference", 42, 6, 0.0);
+    let (done, stop) = (AtomicU64::new(0), AtomicBool::new(true));
+    let report = run_counting(
+        &cohort,
+        &reference,
+        None,
+        AcceptanceCriteria::default(),
+        Progress {
+            done: &done,
+            stop: Some(&stop),
+        },
+    );
+    assert_eq!(done.load(Ordering::SeqCst), 0, "distances were computed");
+    assert!(report.shapes.is_none());
+    assert_eq!(
+        report.not_computed.get("shapes").map(String::as_str),
+        Some("stopped before every Chamfer distance was computed")
+    );
+    // Left alone, the same inputs give the shape level and count every distance.
+    let done = AtomicU64::new(0);
+    let report = run_counting(
+        &cohort,
+        &reference,
+        None,
+        AcceptanceCriteria::default(),
+        Progress::counting(&done),
+    );
+    assert!(report.shapes.is_some(), "{:?}", report.not_computed);
+    assert!(done.load(Ordering::SeqCst) > 0);
 }

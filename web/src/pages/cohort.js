@@ -5,6 +5,7 @@ import { api, access, readableUrl } from "../api.js";
 import { badge, facts, h, num, progressBar, replace } from "../dom.js";
 import { onJob } from "../events.js";
 import { cohortActions } from "./cohorts.js";
+import { validationsSection } from "./validations.js";
 
 const PLOTS = [
   ["pairwise-cd", "Pairwise Chamfer distance"],
@@ -111,14 +112,6 @@ function summaryFacts(c, metrics) {
   ]);
 }
 
-/** Validation results, when the cohort's metrics carry them. */
-function validationSection(metrics) {
-  const v = metrics?.validation;
-  if (!v || typeof v !== "object") return null;
-  const rows = Object.entries(v).filter(([, x]) => typeof x !== "object" || x === null);
-  return h("section", {}, h("h2", {}, "Validation"), facts(rows.map(([k, x]) => [k, typeof x === "number" ? num(x) : String(x)])));
-}
-
 function sortableTable(shapes) {
   let sortBy = 0;
   let ascending = true;
@@ -160,6 +153,8 @@ export async function cohortPage(main, id) {
   const content = h("div");
   const message = h("p", { class: "error", role: "alert" });
   let shownShapes = -1;
+  let validations = null;
+  let stopValidations = () => {};
 
   function drawHead() {
     replace(head,
@@ -175,6 +170,7 @@ export async function cohortPage(main, id) {
     shownShapes = shapes.length;
     const done = cohort.status === "succeeded";
     const metrics = done ? (await api(`/v1/cohorts/${id}/metrics`)).data : null;
+    if (done && !validations) [validations, stopValidations] = validationsSection(cohort);
     replace(content,
       h("div", { class: "columns" },
         h("section", {}, h("h2", {}, "Request and provenance"), requestFacts(cohort)),
@@ -185,7 +181,7 @@ export async function cohortPage(main, id) {
             downloadLink(`/v1/cohorts/${id}/metrics?format=csv`, `cohort-${id}-metrics.csv`, "metrics CSV"), " ",
             downloadLink(`/v1/cohorts/${id}/report`, `cohort-${id}.html`, "report HTML")),
           h("p", { class: "muted" }, "Each shape downloads as GLB, glTF, STL, OBJ or PLY (mm) from the table below."))),
-      validationSection(metrics),
+      validations,
       h("section", {}, h("h2", {}, `Shapes (${shapes.length} of ${cohort.count})`),
         h("ul", { class: "thumbs" }, shapes.map((s) =>
           h("li", {}, h("a", { href: `#/viewer?shape=${s.id}`, title: `Open shape ${s.id} in the viewer` },
@@ -202,7 +198,7 @@ export async function cohortPage(main, id) {
   await drawContent();
 
   let refreshing = false;
-  return onJob(async (job) => {
+  const stopCohort = onJob(async (job) => {
     if (job.subject !== `/v1/cohorts/${id}`) return;
     const finished = job.status !== cohort.status && !["queued", "running"].includes(job.status);
     cohort = { ...cohort, status: job.status, progress: job.progress, error: job.error };
@@ -217,4 +213,8 @@ export async function cohortPage(main, id) {
       refreshing = false;
     }
   });
+  return () => {
+    stopCohort();
+    stopValidations();
+  };
 }
