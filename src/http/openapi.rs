@@ -32,12 +32,13 @@ use super::AppState;
         (name = "validation", description = "Reference populations of real patients and the validation of cohorts against them (shape and measurement level, acceptance criteria, credibility dossier)"),
         (name = "operations", description = "Health, metrics and documentation"),
     ),
-    // Enumerations that query parameters name by `value_type`; the routers collect only
-    // the schemas of bodies.
+    // Enumerations that query parameters and JSON-value fields name by `value_type`; the
+    // routers collect only the schemas of bodies.
     components(schemas(
         super::shapes::DownloadFormat,
         super::simulation_meshes::OpeningsParam,
         super::simulation_meshes::KindParam,
+        super::validations::ReferenceName,
     ))
 )]
 struct ApiDoc;
@@ -102,6 +103,11 @@ impl Modify for AccessDocs {
                 r.entry("401".into()).or_insert(unauthorized.into());
                 let forbidden = problem("Not a valid API key, when reads are protected");
                 r.entry("403".into()).or_insert(forbidden.into());
+                let timeout = problem(
+                    "The request took longer than the configured timeout (a simulation mesh \
+                     made on request may)",
+                );
+                r.entry("408".into()).or_insert(timeout.into());
                 let busy = problem("Too many requests in flight (see Retry-After)");
                 r.entry("503".into()).or_insert(busy.into());
             }

@@ -102,12 +102,24 @@ pub struct ReferenceLinks {
     pub model: String,
 }
 
+// The schema of the `serde_json::Value` fields that name a reference.
+/// Names a reference population: an uploaded reference's id (a number), or `training` /
+/// `heldout`, the model's own shapes.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+#[serde(untagged)]
+pub enum ReferenceName {
+    /// An uploaded reference's id.
+    Uploaded(i64),
+    /// `training` or `heldout`.
+    Own(String),
+}
+
 /// A reference population.
 #[derive(Debug, Serialize, utoipa::ToSchema)]
 pub struct ReferenceView {
     /// What a validation's `reference` names: an uploaded reference's id (a number), or
     /// `training` / `heldout`.
-    #[schema(value_type = Object)]
+    #[schema(value_type = ReferenceName)]
     pub id: serde_json::Value,
     /// Model whose cohorts it validates.
     pub model_id: String,
@@ -489,7 +501,7 @@ async fn delete_reference(
 pub struct CreateValidation {
     /// The reference: `heldout` (the model's held-out shapes: new patients), `training`, or
     /// an uploaded reference's id.
-    #[schema(value_type = Object, example = json!("heldout"))]
+    #[schema(value_type = ReferenceName, example = json!("heldout"))]
     pub reference: serde_json::Value,
     /// Acceptance criteria, every one optional, e.g. `{"nna_max": 0.6, "ks_p_min": 0.05,
     /// "tost_margin_mm": {"annulus_mm": 1.0}}`.
@@ -536,7 +548,7 @@ pub struct ValidationView {
     /// The validated cohort.
     pub cohort_id: i64,
     /// `heldout`, `training` or the uploaded reference's id.
-    #[schema(value_type = Object)]
+    #[schema(value_type = ReferenceName)]
     pub reference: serde_json::Value,
     /// queued | running | succeeded | failed | cancelled (its job's status).
     pub status: JobStatus,
@@ -631,6 +643,7 @@ fn bounded(field: &str, value: Option<u64>, max: u64, default: u64) -> Result<us
               (status = 400, body = Problem, content_type = "application/problem+json", description = "Malformed JSON"),
               (status = 404, body = Problem, content_type = "application/problem+json", description = "Unknown cohort"),
               (status = 409, body = Problem, content_type = "application/problem+json", description = "The cohort has not succeeded"),
+              (status = 415, body = Problem, content_type = "application/problem+json", description = "The body is not `application/json`"),
               (status = 422, body = Problem, content_type = "application/problem+json", description = "A field breaks a rule: an unknown reference or one of another model, `heldout` for a model without a holdout, a criterion out of range (named, e.g. `criteria.nna_max`), or `points` over the work budget (Chamfer distances × points, `--max-validation-work`)"),
               (status = 429, body = Problem, content_type = "application/problem+json", description = "Queue full; see Retry-After")))]
 async fn create_validation(
