@@ -15,6 +15,16 @@ fn ellipsoid_stl(i: usize) -> Vec<u8> {
     write_mesh(&mesh, MeshFormat::Stl, &MeshMetadata::new("mm")).unwrap()
 }
 
+/// The upload of a mesh reference named `patients`: three training ellipsoids as STL.
+fn patient_mesh_parts() -> Vec<(&'static str, Option<&'static str>, Vec<u8>)> {
+    vec![
+        ("name", None, b"patients".to_vec()),
+        ("files", Some("p0.stl"), ellipsoid_stl(0)),
+        ("files", Some("p1.stl"), ellipsoid_stl(2)),
+        ("files", Some("p2.stl"), ellipsoid_stl(4)),
+    ]
+}
+
 async fn upload(app: &TestApp, parts: &[(&str, Option<&str>, Vec<u8>)]) -> TestResponse {
     let (content_type, body) = multipart(parts);
     let path = format!("/v1/models/{MODEL}/references");
@@ -211,12 +221,7 @@ async fn a_table_reference_gives_the_exact_measurement_figures_and_the_verdict()
 async fn a_mesh_reference_gets_the_shape_level_and_deletions_keep_reports_consistent() {
     let app = spawn_app().await;
     let (cohort, _) = finished_cohort(&app, 4).await;
-    let parts: Vec<(&str, Option<&str>, Vec<u8>)> = vec![
-        ("name", None, b"patients".to_vec()),
-        ("files", Some("p0.stl"), ellipsoid_stl(0)),
-        ("files", Some("p1.stl"), ellipsoid_stl(2)),
-        ("files", Some("p2.stl"), ellipsoid_stl(4)),
-    ];
+    let parts = patient_mesh_parts();
     let r = upload(&app, &parts).await;
     assert_eq!(
         r.status,
@@ -537,12 +542,7 @@ async fn the_bundled_models_training_shapes_are_a_reference_under_the_models_has
 async fn a_validation_cancelled_during_its_chamfer_distances_stops_there() {
     let app = spawn_app().await;
     let (cohort, _) = finished_cohort(&app, 4).await;
-    let parts: Vec<(&str, Option<&str>, Vec<u8>)> = vec![
-        ("name", None, b"patients".to_vec()),
-        ("files", Some("p0.stl"), ellipsoid_stl(0)),
-        ("files", Some("p1.stl"), ellipsoid_stl(2)),
-        ("files", Some("p2.stl"), ellipsoid_stl(4)),
-    ];
+    let parts = patient_mesh_parts();
     let r = upload(&app, &parts).await;
     assert_eq!(r.status, StatusCode::CREATED);
     let reference = r.json()["id"].as_i64().unwrap();
