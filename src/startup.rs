@@ -88,6 +88,7 @@ impl Application {
                 simulation::DEFAULT_SLOTS,
                 simulation::DEFAULT_BACKLOG,
                 jobs.objects.clone(),
+                config.max_remesh_triangles,
             )),
             config: Arc::new(config),
             jobs,

@@ -166,7 +166,7 @@ pub fn write_surface(
         .map_err(|e| anyhow::anyhow!("{}: {}", flag(e.field), e.message))?;
     let started = Instant::now();
     let mut kind = request.options.kind;
-    let sim = simulation_mesh_observed(mesh, &request.options, &mut |step| {
+    let sim = simulation_mesh_observed(mesh, &request.options, None, &mut |step| {
         if let Step::Kind(k) = step {
             kind = Some(k);
         }

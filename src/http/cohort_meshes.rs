@@ -19,7 +19,7 @@ use super::cohorts::load as load_cohort;
 use super::error::{ApiError, Problem, Result};
 use super::extractors::{ApiQuery, parse_id};
 use super::shapes::{MeshQuery, encode_mesh};
-use super::simulation_meshes::{SimulationQuery, metadata, param_error};
+use super::simulation_meshes::{SimulationQuery, check_remesh, metadata, param_error};
 use crate::db::{self, shapes::ShapeRow};
 use crate::jobs::simulation::{Admission, Prepared};
 use crate::simulation::{MeshRequest, SimulationRequest};
@@ -51,7 +51,8 @@ struct Entry {
     responses((status = 200, description = "A zip of `shape-<id>[-<variant>].<format>` files and `manifest.csv` (face areas as `name:mm²` separated by `;`; shapes without a simulation mesh listed with their error)", content_type = "application/zip"),
               (status = 400, body = Problem, content_type = "application/problem+json", description = "A parameter out of range or unknown; `field` names it"),
               (status = 404, body = Problem, content_type = "application/problem+json"),
-              (status = 408, body = Problem, content_type = "application/problem+json", description = "Longer than the request deadline; the meshes made are kept, repeat the request")))]
+              (status = 408, body = Problem, content_type = "application/problem+json", description = "Longer than the request deadline; the meshes made are kept, repeat the request"),
+              (status = 422, body = Problem, content_type = "application/problem+json", description = "`remesh_mm` finer than the service's remesh limit (`--max-remesh-triangles`) for the cohort's largest shape; the message names the finest edge length within it")))]
 async fn get_cohort_meshes(
     State(state): State<AppState>,
     Path(id): Path<String>,
@@ -66,6 +67,10 @@ async fn get_cohort_meshes(
         });
     }
     let cohort = load_cohort(&state, parse_id("cohort", &id)?, &id).await?;
+    if let MeshRequest::Simulation { request, .. } = &request {
+        let largest = db::shapes::measure_summary(&state.pool, cohort.cohort_id).await?;
+        check_remesh(&state, largest.area_max.unwrap_or(0.0), request)?;
+    }
     let mut entries = Vec::new();
     let mut offset = 0;
     loop {

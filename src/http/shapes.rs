@@ -278,7 +278,7 @@ pub enum DownloadFormat {
               (status = 304, description = "Matches If-None-Match"),
               (status = 400, body = Problem, content_type = "application/problem+json", description = "Unknown format, units or openings, a parameter out of range, or a simulation parameter for the closed surface; `field` names it"),
               (status = 404, body = Problem, content_type = "application/problem+json"),
-              (status = 422, body = Problem, content_type = "application/problem+json", description = "No simulation mesh for this shape (openings not found, a cut missing the surface); `field` names the parameter to change, or `openings`"),
+              (status = 422, body = Problem, content_type = "application/problem+json", description = "No simulation mesh for this shape (openings not found, a cut missing the surface), or `remesh_mm` finer than the service's remesh limit (`--max-remesh-triangles`, rule `budget`, checked before any work; the message names the finest edge length within it); `field` names the parameter to change, or `openings`"),
               (status = 503, body = Problem, content_type = "application/problem+json", description = "Too many simulation meshes being made; retry after Retry-After")))]
 async fn get_shape_mesh(
     State(state): State<AppState>,

@@ -21,6 +21,7 @@ use super::shapes::if_none_match;
 use crate::db::{self, shapes::ShapeRow};
 use crate::formats::MeshMetadata;
 use crate::jobs::simulation::{Admission, PrepareError, Prepared};
+use crate::simulation::remesh;
 use crate::simulation::request::parse_options;
 use crate::simulation::{
     ParamError, PreparedSimulation, SimulationFormat, SimulationParams, SimulationRequest,
@@ -108,6 +109,18 @@ pub fn param_error(e: ParamError) -> ApiError {
         field: Some(e.field.to_owned()),
         message: e.message,
     }
+}
+
+/// Refuses, before any work, a remesh of a surface of `area_mm2` over the service's limit.
+/// The stored closed surface stands for the capped one; the pipeline checks the capped
+/// surface again, flow extensions included, before it remeshes.
+pub fn check_remesh(state: &AppState, area_mm2: f64, request: &SimulationRequest) -> Result<()> {
+    let Some(mm) = request.options.remesh_mm else {
+        return Ok(());
+    };
+    let max = state.config.max_remesh_triangles;
+    remesh::check_budget(area_mm2, mm, max)
+        .map_err(|e| ApiError::invalid("remesh_mm", "budget", e.to_string()))
 }
 
 /// The options of the shape detail's face table: the defaults, capped.
@@ -225,6 +238,7 @@ pub(super) async fn download(
     if if_none_match(headers, &etag) {
         return Ok((StatusCode::NOT_MODIFIED, cache).into_response());
     }
+    check_remesh(state, shape.area_mm2, &request)?;
     let prepared = prepare(state, &shape, &request).await?;
     let meta = metadata(&shape, &request);
     let variant = request.variant;
@@ -266,7 +280,7 @@ pub fn content_type(format: SimulationFormat) -> &'static str {
               (status = 304, description = "Matches If-None-Match"),
               (status = 400, body = Problem, content_type = "application/problem+json", description = "A parameter out of range or unknown; `field` names it"),
               (status = 404, body = Problem, content_type = "application/problem+json"),
-              (status = 422, body = Problem, content_type = "application/problem+json", description = "No simulation mesh for this shape (openings not found, a cut missing the surface); `field` names the parameter to change, or `openings`"),
+              (status = 422, body = Problem, content_type = "application/problem+json", description = "No simulation mesh for this shape (openings not found, a cut missing the surface), or `remesh_mm` finer than the service's remesh limit (`--max-remesh-triangles`, rule `budget`, checked before any work; the message names the finest edge length within it); `field` names the parameter to change, or `openings`"),
               (status = 503, body = Problem, content_type = "application/problem+json", description = "Too many simulation meshes being made; retry after Retry-After")))]
 pub(super) async fn get_shape_faces(
     State(state): State<AppState>,
@@ -299,6 +313,7 @@ pub(super) async fn get_shape_faces(
     if if_none_match(&headers, &etag) {
         return Ok((StatusCode::NOT_MODIFIED, cache).into_response());
     }
+    check_remesh(&state, shape.area_mm2, &request)?;
     let prepared = prepare(&state, &shape, &request).await?;
     let sidecar = prepared
         .summary

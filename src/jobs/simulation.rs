@@ -22,7 +22,10 @@ use crate::db::simulations::{SimulationOutcome, SimulationRow};
 use crate::formats::mesh_blob;
 use crate::objects::Objects;
 use crate::simulation::request::failure_field;
-use crate::simulation::{PreparedSimulation, SimulationRequest, Step, StoredSimulation};
+use crate::simulation::{
+    PreparedSimulation, SimulationError, SimulationRequest, Step, StoredSimulation,
+    simulation_mesh_observed,
+};
 
 /// Simulation meshes made at once by a service. Remeshing keeps one core busy for seconds;
 /// one run at a time leaves the other cores to requests and cohort jobs.
@@ -75,6 +78,7 @@ type Answer = Option<Result<Prepared, String>>;
 /// The bounded, deduplicated, cached runs of one service.
 pub struct SimulationWork {
     objects: Objects,
+    max_remesh_triangles: u64,
     slots: Arc<Semaphore>,
     backlog: usize,
     running: Arc<Mutex<HashMap<Key, watch::Receiver<Answer>>>>,
@@ -82,10 +86,12 @@ pub struct SimulationWork {
 
 impl SimulationWork {
     /// At most `slots` runs at once, and at most `backlog` started by requests; shapes'
-    /// meshes are read from `objects`.
-    pub fn new(slots: usize, backlog: usize, objects: Objects) -> Self {
+    /// meshes are read from `objects`; a remesh making more than `max_remesh_triangles`
+    /// triangles is refused before it starts.
+    pub fn new(slots: usize, backlog: usize, objects: Objects, max_remesh_triangles: u64) -> Self {
         Self {
             objects,
+            max_remesh_triangles,
             slots: Arc::new(Semaphore::new(slots.max(1))),
             backlog: backlog.max(1),
             running: Arc::default(),
@@ -142,10 +148,11 @@ impl SimulationWork {
         running.insert(key.clone(), rx.clone());
         let (pool, request, objects) = (pool.clone(), request.clone(), self.objects.clone());
         let (slots, map) = (self.slots.clone(), self.running.clone());
+        let max_triangles = self.max_remesh_triangles;
         // Detached: the run finishes and stores its result even when no one waits any more.
         tokio::spawn(async move {
             let result = match slots.acquire_owned().await {
-                Ok(_permit) => run(&pool, &objects, &key, &request).await,
+                Ok(_permit) => run(&pool, &objects, &key, &request, max_triangles).await,
                 Err(e) => Err(anyhow::Error::from(e)),
             };
             map.lock().unwrap_or_else(|e| e.into_inner()).remove(&key);
@@ -195,6 +202,7 @@ async fn run(
     objects: &Objects,
     key: &Key,
     request: &SimulationRequest,
+    max_remesh_triangles: u64,
 ) -> anyhow::Result<Prepared> {
     let (shape_id, _, options) = key;
     let stored = objects
@@ -211,7 +219,8 @@ async fn run(
             let transform = stored.transform();
             let mm = transform.mesh_to_mesh_units(&unit);
             let mut kind = opts.kind;
-            let result = crate::simulation::simulation_mesh_observed(&mm, &opts, &mut |step| {
+            let budget = Some(max_remesh_triangles);
+            let result = simulation_mesh_observed(&mm, &opts, budget, &mut |step| {
                 if let Step::Kind(k) = step {
                     kind = Some(k);
                 }
@@ -227,6 +236,9 @@ async fn run(
     let made = task.await.map_err(join_error)??;
     let (result, kind, mesh_sha256) = made;
     let seconds = started.elapsed().as_secs_f64();
+    // The limit is the service's setting, not a property of the shape: not kept, so a
+    // service started with a higher limit makes the mesh.
+    let over_budget = matches!(result, Err(SimulationError::OverBudget { .. }));
     let (prepared, outcome) = match result {
         Ok(p) => {
             let s = p.to_stored();
@@ -253,6 +265,9 @@ async fn run(
         software_version: crate::VERSION.to_owned(),
         seconds,
     };
+    if over_budget {
+        return Ok(prepared);
+    }
     // A result that cannot be kept (read-only database, full disk) is still the answer.
     if let Err(e) = db::simulations::put(pool, *shape_id, options, &row).await {
         tracing::warn!(shape_id, error = %e, "simulation mesh not stored");

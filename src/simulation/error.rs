@@ -49,6 +49,22 @@ pub enum SimulationError {
         /// Why.
         message: String,
     },
+    /// A remesh would make more triangles than the caller allows (`remesh_mm` too fine for
+    /// the surface).
+    #[error(
+        "a remesh of {area_mm2:.0} mm² to this edge length makes about {triangles} triangles, \
+         over the limit of {max_triangles}; use remesh_mm of at least {finest_mm} mm"
+    )]
+    OverBudget {
+        /// Triangles the remesh would make.
+        triangles: u64,
+        /// The limit.
+        max_triangles: u64,
+        /// Area of the surface to remesh, mm².
+        area_mm2: f64,
+        /// The finest target edge length within the limit, mm.
+        finest_mm: f64,
+    },
     /// The cut or capped surface does not have the expected topology.
     #[error("unexpected topology: {0}")]
     Topology(String),

@@ -10,7 +10,7 @@ use super::extension::{EXTENSION_BASE, extend_openings};
 use super::faces::{FaceData, FaceName, LabelledMesh};
 use super::opening::{Opening, OpeningOptions, ShapeKind, WALL_ID};
 use super::quality::{QualityReport, quality_report};
-use super::remesh::{RemeshOptions, RemeshReport, remesh};
+use super::remesh::{RemeshOptions, RemeshReport, check_budget, remesh};
 use super::root_openings::root_openings;
 use super::tree_openings::tree_openings;
 use super::vessel_tree::vessel_ends;
@@ -149,13 +149,17 @@ pub fn simulation_mesh(
     mesh: &TriMesh,
     opts: &SimulationOptions,
 ) -> Result<SimulationMesh, SimulationError> {
-    simulation_mesh_observed(mesh, opts, &mut |_| {})
+    simulation_mesh_observed(mesh, opts, None, &mut |_| {})
 }
 
-/// [`simulation_mesh`], telling `observe` each step as it starts.
+/// [`simulation_mesh`], telling `observe` each step as it starts; with
+/// `max_remesh_triangles`, a remesh that would make more triangles (counted on the capped
+/// surface, flow extensions included) fails with [`SimulationError::OverBudget`] before it
+/// starts.
 pub fn simulation_mesh_observed(
     mesh: &TriMesh,
     opts: &SimulationOptions,
+    max_remesh_triangles: Option<u64>,
     observe: &mut dyn FnMut(Step),
 ) -> Result<SimulationMesh, SimulationError> {
     let remesh_opts = opts.remesh_mm.map(RemeshOptions::new).transpose()?;
@@ -178,6 +182,9 @@ pub fn simulation_mesh_observed(
     let mut capped = cap_openings(&open, &caps)?;
     let remesh_report = match remesh_opts {
         Some(r) => {
+            if let Some(max) = max_remesh_triangles {
+                check_budget(capped.mesh.area(), r.target_mm, max)?;
+            }
             observe(Step::Remesh);
             let (m, report) = remesh(&capped, &r)?;
             capped = m;

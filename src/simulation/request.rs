@@ -259,6 +259,7 @@ pub fn opening_field(kind: Option<ShapeKind>, opening: &str) -> &'static str {
 pub fn failure_field(kind: Option<ShapeKind>, error: &SimulationError) -> &'static str {
     match error {
         SimulationError::BadOption { field, .. } => field,
+        SimulationError::OverBudget { .. } => "remesh_mm",
         SimulationError::OutsideVessel { opening, .. }
         | SimulationError::CutMissesSurface { opening, .. }
         | SimulationError::CutNotLocal { opening, .. } => opening_field(kind, opening),

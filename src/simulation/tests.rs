@@ -2,6 +2,8 @@
 //! tube, a branched arch (marching cubes of a known signed-distance field) and the
 //! parametric aortic roots.
 
+use super::remesh::expected_triangles;
+use super::request::failure_field;
 use super::test_shapes::{BranchedArch, straight_tube};
 use super::*;
 use crate::anatomy::sections::PlaneFrame;
@@ -408,4 +410,74 @@ fn the_same_input_gives_the_same_remeshed_mesh() {
     );
     assert_eq!(a.capped, b.capped);
     assert_eq!(a.faces, b.faces);
+}
+
+#[test]
+fn a_remesh_makes_about_the_expected_number_of_triangles() {
+    let mesh = straight_tube(10.0, 100.0, [0.0; 3], [0.0, 0.0, 1.0], 100, 72);
+    let tube = SimulationOptions {
+        kind: Some(ShapeKind::Tube),
+        ..Default::default()
+    };
+    let capped = simulation_mesh(&mesh, &tube).unwrap().capped.mesh.area();
+    for mm in [1.0, 2.0] {
+        let opts = SimulationOptions {
+            remesh_mm: Some(mm),
+            ..tube.clone()
+        };
+        let made = simulation_mesh(&mesh, &opts).unwrap();
+        let made = made.remesh.unwrap().triangles_after as f64;
+        let expected = expected_triangles(capped, mm) as f64;
+        assert!(
+            (made / expected - 1.0).abs() < 0.2,
+            "{mm} mm: {made} vs {expected}"
+        );
+    }
+}
+
+#[test]
+fn a_remesh_over_the_budget_stops_before_it_starts_and_names_the_finest_edge() {
+    let mesh = straight_tube(10.0, 100.0, [0.0; 3], [0.0, 0.0, 1.0], 100, 72);
+    let opts = SimulationOptions {
+        kind: Some(ShapeKind::Tube),
+        remesh_mm: Some(0.5),
+        ..Default::default()
+    };
+    let mut steps = Vec::new();
+    let err =
+        simulation_mesh_observed(&mesh, &opts, Some(5_000), &mut |s| steps.push(s)).unwrap_err();
+    assert_eq!(failure_field(opts.kind, &err), "remesh_mm");
+    let SimulationError::OverBudget {
+        triangles,
+        max_triangles,
+        area_mm2,
+        finest_mm,
+    } = err
+    else {
+        panic!("{err}");
+    };
+    assert!(!steps.contains(&Step::Remesh), "{steps:?}");
+    assert_eq!(max_triangles, 5_000);
+    assert_eq!(triangles, expected_triangles(area_mm2, 0.5));
+    assert!(expected_triangles(area_mm2, finest_mm) <= 5_000);
+    assert!(expected_triangles(area_mm2, finest_mm - 0.01) > 5_000);
+
+    // At the edge it names, the same budget admits the remesh.
+    let within = SimulationOptions {
+        remesh_mm: Some(finest_mm),
+        ..opts.clone()
+    };
+    let sim = simulation_mesh_observed(&mesh, &within, Some(5_000), &mut |_| {}).unwrap();
+    assert!(sim.remesh.is_some());
+
+    // Flow extensions are counted: at an edge within the budget for the closed tube, the
+    // capped tube with two 10-diameter extensions is over it.
+    let closed_finest = super::remesh::finest_target_mm(mesh.area(), 5_000);
+    let extended = SimulationOptions {
+        extension_diameters: 10.0,
+        remesh_mm: Some(closed_finest),
+        ..opts
+    };
+    let err = simulation_mesh_observed(&mesh, &extended, Some(5_000), &mut |_| {}).unwrap_err();
+    assert!(matches!(err, SimulationError::OverBudget { .. }), "{err}");
 }

@@ -24,6 +24,44 @@ use project::TriangleTree;
 /// Smallest and largest accepted target edge length, mm.
 pub const TARGET_RANGE_MM: (f64, f64) = (0.1, 10.0);
 
+/// Triangles an isotropic remesh of `area_mm2` to edges of `target_mm` makes: the area over
+/// an equilateral triangle's. The remesh's time and memory grow with it, so services bound
+/// it before starting.
+pub fn expected_triangles(area_mm2: f64, target_mm: f64) -> u64 {
+    let triangle = 3f64.sqrt() / 4.0 * target_mm * target_mm;
+    (area_mm2.max(0.0) / triangle).ceil() as u64
+}
+
+/// The finest target edge length, to 0.01 mm, whose remesh of `area_mm2` makes at most
+/// `max_triangles` triangles.
+pub fn finest_target_mm(area_mm2: f64, max_triangles: u64) -> f64 {
+    let edge = (area_mm2.max(0.0) / (3f64.sqrt() / 4.0 * max_triangles.max(1) as f64)).sqrt();
+    let mut hundredths = (edge * 100.0).ceil();
+    while expected_triangles(area_mm2, hundredths / 100.0) > max_triangles {
+        hundredths += 1.0;
+    }
+    (hundredths / 100.0).max(TARGET_RANGE_MM.0)
+}
+
+/// Refuses a remesh of `area_mm2` to `target_mm` that would make more than `max_triangles`
+/// triangles, naming the finest target within the limit.
+pub fn check_budget(
+    area_mm2: f64,
+    target_mm: f64,
+    max_triangles: u64,
+) -> Result<(), SimulationError> {
+    let triangles = expected_triangles(area_mm2, target_mm);
+    if triangles <= max_triangles {
+        return Ok(());
+    }
+    Err(SimulationError::OverBudget {
+        triangles,
+        max_triangles,
+        area_mm2,
+        finest_mm: finest_target_mm(area_mm2, max_triangles),
+    })
+}
+
 /// Remeshing settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RemeshOptions {
