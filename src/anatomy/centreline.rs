@@ -18,6 +18,7 @@ pub struct Centreline {
     head_length: f64,
     full: Polyline,
     smoothing: f64,
+    starts_proximal: bool,
 }
 
 impl Centreline {
@@ -55,7 +56,21 @@ impl Centreline {
             tail,
             head_length,
             smoothing,
+            starts_proximal: false,
         }
+    }
+
+    /// The same line, known to start at the vessel's proximal end (`true`: the ascending
+    /// end of an aorta with branches) or not known to.
+    pub fn starting_proximal(mut self, starts_proximal: bool) -> Self {
+        self.starts_proximal = starts_proximal;
+        self
+    }
+
+    /// Whether the line is known to start at the vessel's proximal end, where a root's
+    /// inlet is.
+    pub fn starts_proximal(&self) -> bool {
+        self.starts_proximal
     }
 
     /// The centreline through a tracked path whose first and last points are the exits.
@@ -167,6 +182,7 @@ pub fn refine(
     mut line: Centreline,
     opts: &MeasureOptions,
 ) -> Result<Centreline, MeasureError> {
+    let starts_proximal = line.starts_proximal;
     for _ in 0..opts.iterations {
         // A plane near an end that is still tilted against a cap gives no wall section and
         // is skipped until the end has been re-extrapolated from the interior.
@@ -199,7 +215,8 @@ pub fn refine(
             opts.smoothing_mm,
             opts.station_spacing_mm,
             opts.smoothing_mm + 5.0 * opts.station_spacing_mm,
-        );
+        )
+        .starting_proximal(starts_proximal);
         if moved < 1e-3 {
             break;
         }

@@ -3,8 +3,10 @@
 //! (annulus, sinus of Valsalva, sinotubular junction, sinus height, ascending aorta).
 //!
 //! Method (docs/MEASUREMENTS.md has the details and the validation):
-//! 1. first guess: the ends are the geodesically farthest vertex pair, the centre points the
-//!    centroids of the level sets of the geodesic distance from one end ([`geodesic`]);
+//! 1. first guess: for a vessel with branches, the ring centroids along the main path of its
+//!    level-set tree ([`vessel_tree`]), from the proximal end; otherwise the ends are the
+//!    geodesically farthest vertex pair and the centre points the centroids of the level sets
+//!    of the geodesic distance from one end ([`geodesic`]);
 //! 2. refinement: at evenly spaced stations the surface is cut by the plane normal to the
 //!    smoothed centreline, the closed loop surrounding the centre point is kept (other loops
 //!    — the other limb of an arch, a side branch — are ignored) and its area centroid becomes
@@ -21,10 +23,15 @@ pub mod sections;
 pub mod shape;
 pub mod surface;
 pub mod tracking;
+pub mod vessel_tree;
+
+#[cfg(test)]
+mod tests;
 
 use serde::{Deserialize, Serialize};
 
 use crate::geometry::MeshError;
+use polyline::Polyline;
 pub use root::{RootLandmarks, measure_root, measure_root_with_landmarks};
 use surface::Surface;
 
@@ -142,10 +149,69 @@ pub(crate) fn vessel_centreline(
     opts: &MeasureOptions,
 ) -> Result<centreline::Centreline, MeasureError> {
     opts.validate()?;
-    let rough = geodesic::level_set_centres(surface, 2.0 * opts.station_spacing_mm)?;
-    let tracked = tracking::track(surface, &rough, opts.station_spacing_mm, opts.smoothing_mm)?;
-    let initial = centreline::Centreline::from_path(surface, tracked, opts);
+    let rough = rough_centreline(surface, 2.0 * opts.station_spacing_mm)?;
+    let tracked = tracking::track(
+        surface,
+        &rough.points,
+        opts.station_spacing_mm,
+        opts.smoothing_mm,
+    )?;
+    let initial = centreline::Centreline::from_path(surface, tracked, opts)
+        .starting_proximal(rough.starts_proximal);
     centreline::refine(surface, initial, opts)
+}
+
+/// The first guess of the main vessel's centreline. For a vessel with side branches, the
+/// ring centroids along the main path of the level-set tree ([`vessel_tree`]) from the
+/// proximal end (the ascending aorta) to the descending one: it never turns into a branch,
+/// however long the branch is, and follows the ascending aorta to its end. Otherwise the
+/// level sets from the geodesically farthest vertex pair ([`geodesic`]).
+pub fn rough_centreline(surface: &Surface, step: f64) -> Result<RoughCentreline, MeasureError> {
+    let farthest_pair = || {
+        geodesic::level_set_centres(surface, step).map(|points| RoughCentreline {
+            points,
+            starts_proximal: false,
+        })
+    };
+    // Without side branches the farthest pair are the tube's two ends.
+    let ends = match vessel_tree::vessel_ends(surface, step) {
+        Ok(ends) if !ends.branches.is_empty() => ends,
+        _ => return farthest_pair(),
+    };
+    // Over an end cap the level sets are arcs round the cap's centre, not rings round the
+    // tube: rings narrower than most of the path are left out at both ends (the ends are
+    // tracked again from the interior).
+    let rings = &ends.main_path;
+    let mut radii: Vec<f64> = rings.iter().map(|r| r.radius_mm).collect();
+    radii.sort_by(f64::total_cmp);
+    let Some(&median) = radii.get(radii.len() / 2) else {
+        return farthest_pair();
+    };
+    let round = |r: &vessel_tree::PathRing| r.radius_mm >= 0.7 * median;
+    let first = rings.iter().position(round).unwrap_or(0);
+    let last = rings.iter().rposition(round).unwrap_or(0);
+    if last < first + 3 {
+        return farthest_pair();
+    }
+    // Where a branch leaves, a ring goes round both vessels: its centroid is off the axis.
+    let centres = rings[first..=last]
+        .iter()
+        .filter(|r| !r.junction)
+        .map(|r| r.centre)
+        .collect();
+    Ok(RoughCentreline {
+        points: Polyline::new(centres),
+        starts_proximal: true,
+    })
+}
+
+/// A first guess of the centreline, and whether it is known to start at the proximal end.
+#[derive(Debug, Clone)]
+pub struct RoughCentreline {
+    /// Centre points from one end of the vessel to the other.
+    pub points: Polyline,
+    /// True when the first point is at the proximal end (an aorta with branches).
+    pub starts_proximal: bool,
 }
 
 /// The station of `line` at arc length `s`, or `None` when no closed loop surrounds it.

@@ -24,6 +24,18 @@ const DENSE_STEP: f64 = 0.25;
 const DENSE_SMOOTHING: f64 = 0.75;
 /// Smallest sinus prominence (mm of equivalent diameter) accepted as a root bulge.
 const MIN_PROMINENCE: f64 = 0.25;
+/// Smallest sinus prominence relative to the sinus's equivalent diameter. Sinuses of
+/// Valsalva stand 5–10 % above both sides in equivalent diameter (the parametric roots:
+/// 5.2–9.1 %); a vessel without a root shows bumps of a few tenths of a millimetre where
+/// the surface is coarse.
+const MIN_RELATIVE_PROMINENCE: f64 = 0.03;
+/// Farthest a sinus lies from the vessel's end, in sinus diameters: the sinus sits right
+/// above the annulus (the parametric roots: 0.5–0.75 diameters with their outflow tract).
+/// Farther along, a widening is the arch where the branches leave, not a root.
+const SINUS_REACH_DIAMETERS: f64 = 1.0;
+/// How far on either side of a sinus its prominence is measured, in sinus diameters: past
+/// the annulus and the sinotubular junction (the parametric roots: within 0.8 diameters).
+const PROMINENCE_REACH_DIAMETERS: f64 = 1.5;
 
 /// The centreline seen from the annulus end: σ = distance from that end.
 struct RootLine<'a> {
@@ -102,15 +114,26 @@ fn derivative(values: &[f64], step: f64) -> Vec<f64> {
         .collect()
 }
 
-/// Index of the interior local maximum with the largest prominence, and that prominence.
-fn most_prominent_peak(d: &[f64]) -> Option<(usize, f64)> {
+/// Index of the interior local maximum with the largest prominence among those `accept`
+/// takes (given the index and the prominence), and that prominence. The prominence is the
+/// height above the lower of the two minima within `reach(i)` samples on either side: a
+/// sinus stands above the annulus and the junction next to it, and the far end of the
+/// vessel (a rounded cap narrowing to nothing) does not make a bump prominent.
+fn most_prominent_peak(
+    d: &[f64],
+    reach: impl Fn(usize) -> usize,
+    accept: impl Fn(usize, f64) -> bool,
+) -> Option<(usize, f64)> {
+    let lowest = |values: &[f64]| values.iter().copied().fold(f64::INFINITY, f64::min);
     (1..d.len().saturating_sub(1))
         .filter(|&i| d[i] >= d[i - 1] && d[i] > d[i + 1])
         .map(|i| {
-            let left = d[..i].iter().copied().fold(f64::INFINITY, f64::min);
-            let right = d[i + 1..].iter().copied().fold(f64::INFINITY, f64::min);
+            let r = reach(i).max(1);
+            let left = lowest(&d[i.saturating_sub(r)..i]);
+            let right = lowest(&d[i + 1..(i + 1 + r).min(d.len())]);
             (i, (d[i] - left).min(d[i] - right))
         })
+        .filter(|&(i, prominence)| accept(i, prominence))
         .max_by(|a, b| a.1.total_cmp(&b.1))
 }
 
@@ -358,16 +381,28 @@ pub(crate) fn measure_prepared_root(
             .collect::<Vec<_>>(),
         2.0 / spacing,
     );
-    let (peak, prominence) = most_prominent_peak(&profile)
-        .filter(|&(_, p)| p >= MIN_PROMINENCE)
-        .ok_or_else(|| {
-            MeasureError::NotARoot(format!(
-                "the diameter profile has no sinus bulge (an interior maximum at least \
-                 {MIN_PROMINENCE} mm above both sides)"
-            ))
-        })?;
-    tracing::debug!(prominence, "sinus bulge found");
     let length = line.length();
+    // On an aorta with branches the root can only be at the proximal end.
+    let is_sinus = |i: usize, prominence: f64| {
+        let s = stations[i].s_mm;
+        let from_end = if line.starts_proximal() {
+            s
+        } else {
+            s.min(length - s)
+        };
+        from_end <= SINUS_REACH_DIAMETERS * profile[i]
+            && prominence >= MIN_PROMINENCE.max(MIN_RELATIVE_PROMINENCE * profile[i])
+    };
+    let reach = |i: usize| (PROMINENCE_REACH_DIAMETERS * profile[i] / spacing).ceil() as usize;
+    let (peak, prominence) = most_prominent_peak(&profile, reach, is_sinus).ok_or_else(|| {
+        MeasureError::NotARoot(format!(
+            "the diameter profile has no sinus bulge: no maximum within \
+             {SINUS_REACH_DIAMETERS} diameter of an end standing at least \
+             {:.0} % ({MIN_PROMINENCE} mm) above both sides",
+            100.0 * MIN_RELATIVE_PROMINENCE
+        ))
+    })?;
+    tracing::debug!(prominence, "sinus bulge found");
     let forward = stations[peak].s_mm <= 0.5 * length;
     let root = RootLine {
         surface,

@@ -40,7 +40,6 @@ pub(crate) mod test_shapes;
 #[cfg(test)]
 mod tests;
 pub mod tree_openings;
-pub mod vessel_tree;
 
 pub use error::SimulationError;
 pub use export::{SimulationFormat, Variant, encode, sidecar, write_all};

@@ -13,7 +13,7 @@ use super::quality::{QualityReport, quality_report};
 use super::remesh::{RemeshOptions, RemeshReport, check_budget, remesh};
 use super::root_openings::root_openings;
 use super::tree_openings::tree_openings;
-use super::vessel_tree::vessel_ends;
+use super::tree_openings::vessel_ends;
 use crate::anatomy::sections::PlaneFrame;
 use crate::anatomy::surface::Surface;
 use crate::geometry::TriMesh;

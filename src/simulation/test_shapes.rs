@@ -103,7 +103,9 @@ impl BranchedArch {
         (dir.map(|c| c * Self::ARCH), dir)
     }
 
-    fn main_distance(p: [f64; 3]) -> f64 {
+    /// Distance from `p` to the main vessel's centreline, with a descending leg of
+    /// `descending` mm.
+    pub(crate) fn main_axis_distance(p: [f64; 3], descending: f64) -> f64 {
         let (x, z) = (p[0], p[2]);
         let arch = if z >= 0.0 {
             let rho = x.hypot(z);
@@ -112,16 +114,22 @@ impl BranchedArch {
             f64::INFINITY
         };
         let up = segment_distance(p, [-Self::ARCH, 0.0, -20.0], [-Self::ARCH, 0.0, 0.0]);
-        let down = segment_distance(p, [Self::ARCH, 0.0, 0.0], [Self::ARCH, 0.0, -50.0]);
-        arch.min(up).min(down) - Self::RADIUS
+        let down = segment_distance(p, [Self::ARCH, 0.0, 0.0], [Self::ARCH, 0.0, -descending]);
+        arch.min(up).min(down)
     }
 
     /// The signed distance (approximately Euclidean; negative inside).
     pub(crate) fn sdf(p: [f64; 3]) -> f64 {
-        let mut d = Self::main_distance(p);
+        Self::sdf_with(p, 50.0, 25.0)
+    }
+
+    /// The signed distance of the arch with a descending leg of `descending` mm and
+    /// branches reaching `branch` mm above the arch centreline.
+    pub(crate) fn sdf_with(p: [f64; 3], descending: f64, branch: f64) -> f64 {
+        let mut d = Self::main_axis_distance(p, descending) - Self::RADIUS;
         for k in 0..3 {
             let (base, dir) = Self::branch(k);
-            let tip = std::array::from_fn(|i| base[i] + 25.0 * dir[i]);
+            let tip = std::array::from_fn(|i| base[i] + branch * dir[i]);
             let b = segment_distance(p, base, tip) - Self::BRANCH_RADIUS;
             d = smooth_min(d, b, 3.0);
         }
@@ -132,6 +140,19 @@ impl BranchedArch {
     pub(crate) fn mesh() -> TriMesh {
         mesh_of(Self::sdf, 64.0, 129)
     }
+
+    /// The arch with 90 mm branches, at 1 mm spacing: the geodesically farthest points
+    /// are a branch tip and a main end, as on thoracic aortas cut short below the arch.
+    pub(crate) fn long_branches_mesh() -> TriMesh {
+        mesh_of(
+            |p| Self::sdf_with(p, Self::LONG_BRANCHES_DESCENDING, 90.0),
+            115.0,
+            231,
+        )
+    }
+
+    /// Descending leg of [`BranchedArch::long_branches_mesh`], mm.
+    pub(crate) const LONG_BRANCHES_DESCENDING: f64 = 50.0;
 }
 
 /// Polynomial smooth minimum with blending width `k`.

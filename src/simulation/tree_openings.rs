@@ -1,17 +1,27 @@
 //! Openings of a branched aorta or a plain tube, placed a stated distance in from each end:
-//! the ends come from the vessel's level-set tree ([`super::vessel_tree`]), the planes from
+//! the ends come from the vessel's level-set tree ([`crate::anatomy::vessel_tree`]), the planes from
 //! sections of the lumen near each end, perpendicular to the local centreline.
 
 use super::SimulationError;
 use super::opening::{FIRST_OUTLET_ID, INLET_ID, Opening, OpeningOptions, ShapeKind};
-use super::vessel_tree::{VesselEnd, VesselEnds, vessel_ends};
+use crate::anatomy::MeasureError;
 use crate::anatomy::geodesic::Graph;
 use crate::anatomy::sections::contours;
 use crate::anatomy::surface::Surface;
+use crate::anatomy::vessel_tree::{self, VesselEnd, VesselEnds};
 use crate::geometry::mesh::{dot, norm, normalized, sub};
 
 /// Refinement passes of an end plane (each re-centres the plane and re-measures the tangent).
 const PASSES: usize = 6;
+
+/// The vessel's ends ([`vessel_tree::vessel_ends`]); a surface without two ends has no
+/// openings to place.
+pub fn vessel_ends(surface: &Surface, spacing: f64) -> Result<VesselEnds, SimulationError> {
+    vessel_tree::vessel_ends(surface, spacing).map_err(|e| match e {
+        MeasureError::NotTubular(why) => SimulationError::OpeningsNotFound(why),
+        other => SimulationError::Measure(other),
+    })
+}
 
 /// Openings of an aorta (inlet, descending outlet, one outlet per branch) or of a tube
 /// (inlet at the wider end, outlet at the other; a tube with branches is refused).

@@ -7,10 +7,10 @@
 
 use std::collections::VecDeque;
 
-use super::SimulationError;
-use crate::anatomy::geodesic::{Graph, farthest, seed_vertex};
-use crate::anatomy::sections::contours;
-use crate::anatomy::surface::Surface;
+use super::MeasureError;
+use super::geodesic::{Graph, farthest, seed_vertex};
+use super::sections::contours;
+use super::surface::Surface;
 use crate::geometry::mesh::{norm, sub};
 
 /// One end of the vessel: the ring centres from the end inward (to the first junction).
@@ -33,6 +33,22 @@ pub struct VesselEnds {
     pub distal: VesselEnd,
     /// Branch ends ordered by where they leave the main path, from the proximal end on.
     pub branches: Vec<VesselEnd>,
+    /// The rings along the main path, from the proximal end to the distal one: a first
+    /// guess of the main vessel's centreline that never turns into a branch.
+    pub main_path: Vec<PathRing>,
+}
+
+/// One ring of the main path.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathRing {
+    /// Centroid of the ring's curve.
+    pub centre: [f64; 3],
+    /// Perimeter / 2π, mm: the tube's radius where the ring goes round it, less over an end
+    /// cap.
+    pub radius_mm: f64,
+    /// Whether the ring splits or merges with another between its level and the next: it
+    /// goes round the main vessel and a branch's base, its centroid off the main axis.
+    pub junction: bool,
 }
 
 /// A ring: one connected curve of a level set.
@@ -51,12 +67,12 @@ struct RingGraph {
 }
 
 /// Finds the ends of `surface` with level sets every `spacing` mm.
-pub fn vessel_ends(surface: &Surface, spacing: f64) -> Result<VesselEnds, SimulationError> {
+pub fn vessel_ends(surface: &Surface, spacing: f64) -> Result<VesselEnds, MeasureError> {
     let graph = build(surface, spacing)?;
     let mut alive = vec![true; graph.rings.len()];
     let ends = prune(&graph, &mut alive);
     if ends.len() < 2 {
-        return Err(SimulationError::OpeningsNotFound(format!(
+        return Err(MeasureError::NotTubular(format!(
             "the surface has {} end(s); a vessel has at least two",
             ends.len()
         )));
@@ -65,10 +81,8 @@ pub fn vessel_ends(surface: &Surface, spacing: f64) -> Result<VesselEnds, Simula
     let mut by_width: Vec<usize> = (0..chains.len()).collect();
     by_width.sort_by(|&a, &b| chains[b].radius.total_cmp(&chains[a].radius));
     let (a, b) = (by_width[0], by_width[1]);
-    let path =
-        shortest_path(&graph, &alive, chains[a].nodes[0], chains[b].nodes[0]).ok_or_else(|| {
-            SimulationError::OpeningsNotFound("the main ends are not connected".into())
-        })?;
+    let path = shortest_path(&graph, &alive, chains[a].nodes[0], chains[b].nodes[0])
+        .ok_or_else(|| MeasureError::NotTubular("the main ends are not connected".into()))?;
     let along = cumulative(&graph, &path);
     let mut branches: Vec<(f64, usize)> = by_width[2..]
         .iter()
@@ -90,8 +104,17 @@ pub fn vessel_ends(surface: &Surface, spacing: f64) -> Result<VesselEnds, Simula
         None => true,
     };
     let (proximal, distal) = if a_is_proximal { (a, b) } else { (b, a) };
+    let mut main_path: Vec<PathRing> = path
+        .iter()
+        .map(|&n| PathRing {
+            centre: graph.rings[n].centroid,
+            radius_mm: graph.rings[n].perimeter / std::f64::consts::TAU,
+            junction: live_links(&graph, &alive, n).count() > 2,
+        })
+        .collect();
     if !a_is_proximal {
         branches.reverse();
+        main_path.reverse();
     }
     Ok(VesselEnds {
         proximal: chains[proximal].to_end(&graph),
@@ -100,11 +123,12 @@ pub fn vessel_ends(surface: &Surface, spacing: f64) -> Result<VesselEnds, Simula
             .iter()
             .map(|&(_, c)| chains[c].to_end(&graph))
             .collect(),
+        main_path,
     })
 }
 
 /// Level-set rings of the geodesic distance from a vessel end, linked across levels.
-fn build(surface: &Surface, spacing: f64) -> Result<RingGraph, SimulationError> {
+fn build(surface: &Surface, spacing: f64) -> Result<RingGraph, MeasureError> {
     let edges = Graph::new(surface);
     let seed = farthest(&edges.distances(seed_vertex(surface)));
     let d = edges.distances(seed);
@@ -115,7 +139,7 @@ fn build(surface: &Surface, spacing: f64) -> Result<RingGraph, SimulationError> 
         .fold(0.0, f64::max);
     let levels = (span / spacing - 0.5).floor().max(0.0) as usize;
     if levels < 4 {
-        return Err(SimulationError::OpeningsNotFound(format!(
+        return Err(MeasureError::NotTubular(format!(
             "the surface spans only {span:.1} mm between its farthest points"
         )));
     }

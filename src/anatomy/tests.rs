@@ -1,0 +1,89 @@
+//! Centrelines and root landmarks of branched vessels, against the analytic arch of the
+//! simulation tests: the main vessel's centreline never turns into a branch, however long,
+//! and a widening that is not a sinus of Valsalva is not taken for one.
+
+use super::*;
+use crate::geometry::mesh::{norm, sub};
+use crate::simulation::test_shapes::{BranchedArch, mesh_of};
+
+/// Where the arch's ascending and descending legs end (the centres of their rounded ends).
+const ASCENDING_END: [f64; 3] = [-BranchedArch::ARCH, 0.0, -20.0];
+
+#[test]
+fn a_long_branch_does_not_take_the_centreline_out_of_the_aorta() {
+    let mesh = BranchedArch::long_branches_mesh();
+    let surface = Surface::new(&mesh).unwrap();
+    // The shape does what it is for: the farthest-pair first guess runs into a branch.
+    let farthest = geodesic::level_set_centres(&surface, 2.0).unwrap();
+    let off_axis = farthest
+        .points()
+        .iter()
+        .map(|&p| BranchedArch::main_axis_distance(p, BranchedArch::LONG_BRANCHES_DESCENDING))
+        .fold(0.0, f64::max);
+    assert!(off_axis > 20.0, "{off_axis}");
+
+    let measured = measure_vessel(&mesh, &MeasureOptions::default()).unwrap();
+    let stations = &measured.stations;
+    // Inside the rounded end caps the centreline runs past the ends of the axis.
+    let length = measured.centreline_length_mm;
+    let cap = BranchedArch::RADIUS;
+    for s in stations
+        .iter()
+        .filter(|s| s.s_mm > cap && s.s_mm < length - cap)
+    {
+        let off =
+            BranchedArch::main_axis_distance(s.centre, BranchedArch::LONG_BRANCHES_DESCENDING);
+        assert!(
+            off < 1.5,
+            "station at {:.1} mm is {off:.2} mm off the axis",
+            s.s_mm
+        );
+    }
+    // From one main end round the arch to the other, each reached to within its 9 mm
+    // rounded cap.
+    let descending_end = [
+        BranchedArch::ARCH,
+        0.0,
+        -BranchedArch::LONG_BRANCHES_DESCENDING,
+    ];
+    let (first, last) = (stations[0].centre, stations[stations.len() - 1].centre);
+    let near = |p: [f64; 3], q: [f64; 3]| norm(sub(p, q)) < 9.5;
+    assert!(
+        (near(first, ASCENDING_END) && near(last, descending_end))
+            || (near(first, descending_end) && near(last, ASCENDING_END)),
+        "{first:?} {last:?}"
+    );
+    // Legs of 20 and 50 mm and a half-circle arch of radius 30, plus up to a radius into
+    // each rounded cap (and 1 mm for the 1 mm marching-cubes surface).
+    let axis =
+        20.0 + BranchedArch::LONG_BRANCHES_DESCENDING + std::f64::consts::PI * BranchedArch::ARCH;
+    assert!(length > axis && length < axis + 2.0 * cap + 1.0, "{length}");
+}
+
+#[test]
+fn an_aorta_without_a_sinus_is_not_a_root() {
+    let err = measure_root(&BranchedArch::mesh()).unwrap_err();
+    assert!(matches!(err, MeasureError::NotARoot(_)), "{err}");
+}
+
+/// A flat-ended cylinder of radius 12 and length 120 mm along z with a smooth
+/// rotationally symmetric bulge of 2.5 mm centred `at` mm from one end.
+fn tube_with_bulge(at: f64) -> crate::geometry::TriMesh {
+    mesh_of(
+        move |p| {
+            let bulge = 2.5 * (-0.5 * ((p[2] + 60.0 - at) / 5.0).powi(2)).exp();
+            (p[0].hypot(p[1]) - 12.0 - bulge).max(p[2].abs() - 60.0)
+        },
+        75.0,
+        151,
+    )
+}
+
+#[test]
+fn a_widening_far_from_the_ends_is_not_a_sinus() {
+    let err = measure_root(&tube_with_bulge(60.0)).unwrap_err();
+    let MeasureError::NotARoot(why) = &err else {
+        panic!("{err}");
+    };
+    assert!(why.contains("within 1 diameter of an end"), "{why}");
+}
