@@ -3,7 +3,8 @@
 # trained on 80 shapes with 20 held out, 100-shape cohorts of every sampler and setting,
 # each validated against the held-out shapes and against the training shapes.
 #   docs/representative/run.sh DATA_DIR [OUT_DIR]    (RESOLUTION=64 COUNT=100 SEED=2026 POINTS=2000;
-#   AORTAGEN=path/to/binary to use a built binary instead of building one)
+#   AORTAGEN=path/to/binary to use a built binary instead of building one; EVALUATE=0 to skip
+#   the held-out fitting of `aortagen evaluate`, which the validations do not need)
 # Every step is skipped when its output exists, so an interrupted run continues.
 set -euo pipefail
 data="${1:?usage: run.sh DATA_DIR [OUT_DIR]}"
@@ -34,7 +35,7 @@ if [ ! -f "$model/manifest.json" ] || ! grep -q '"complete": true' "$model/manif
     timed train "$bin" train --data "$data" --out "$model" --preset cpu --seed "$seed" \
         --holdout 20 "${resume[@]}" > "$out/train.log" 2>&1
 fi
-if [ ! -f "$model/evaluation.json" ]; then
+if [ "${EVALUATE:-1}" != 0 ] && [ ! -f "$model/evaluation.json" ]; then
     timed evaluate "$bin" evaluate --model "$model" --resolution 128 \
         --json "$model/evaluation.json" > "$out/evaluate.log" 2>&1
 fi
