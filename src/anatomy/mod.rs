@@ -54,6 +54,20 @@ pub struct Station {
     pub min_diameter_mm: f64,
 }
 
+/// A section is taken for the main lumen alone when its maximal Feret diameter is at most
+/// this multiple of its minimal one. A plane through a branch ostium cuts up into the branch
+/// and its loop is long and thin (2.5–3.5× on the arch of SynthAorta's aortas); a lumen
+/// that is round or moderately elliptic stays well below.
+pub const SINGLE_LUMEN_MAX_ASPECT: f64 = 1.5;
+
+impl Station {
+    /// Whether the section is the main lumen alone, not a lumen merged with a branch ostium
+    /// ([`SINGLE_LUMEN_MAX_ASPECT`]).
+    pub fn is_single_lumen(&self) -> bool {
+        self.max_diameter_mm <= SINGLE_LUMEN_MAX_ASPECT * self.min_diameter_mm
+    }
+}
+
 /// Centreline length and diameter profile of a tubular surface.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VesselMeasurements {
@@ -61,6 +75,22 @@ pub struct VesselMeasurements {
     pub centreline_length_mm: f64,
     /// Sections at evenly spaced arc lengths, in order.
     pub stations: Vec<Station>,
+}
+
+impl VesselMeasurements {
+    /// The largest area-equivalent diameter of the vessel: over the sections of the main
+    /// lumen alone ([`Station::is_single_lumen`]), as a clinician leaves the branch ostia
+    /// out; over all sections when none qualifies.
+    pub fn max_diameter_mm(&self) -> f64 {
+        let largest = |single_lumen_only: bool| {
+            self.stations
+                .iter()
+                .filter(|s| !single_lumen_only || s.is_single_lumen())
+                .map(|s| s.equivalent_diameter_mm)
+                .fold(None, |m: Option<f64>, d| Some(m.map_or(d, |m| m.max(d))))
+        };
+        largest(true).or_else(|| largest(false)).unwrap_or(0.0)
+    }
 }
 
 /// Landmark diameters and heights of an aortic root.

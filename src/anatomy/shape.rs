@@ -24,10 +24,34 @@ pub struct ShapeAnatomy {
     pub ascending_mm: Option<f64>,
     /// Centreline length.
     pub length_mm: f64,
-    /// Largest area-equivalent diameter along the centreline.
+    /// Largest area-equivalent diameter along the centreline, branch ostia left out
+    /// (sections more than 1.5× as long as wide).
     pub max_diameter_mm: f64,
     /// Why the root landmarks are missing (`method` = `vessel`).
     pub root_error: Option<String>,
+    /// The version of the measurement method ([`MEASUREMENT_VERSION`]); 1 when absent
+    /// (stored before the method had versions).
+    #[serde(default = "first_measurement_version")]
+    pub measurement_version: u32,
+}
+
+/// The version of the measurement method. Values measured by another version are not
+/// comparable with today's and are measured again before they are compared:
+/// - 1: centreline from the geodesically farthest vertex pair (it could end in a branch),
+///   maximum diameter over every section;
+/// - 2: centreline along the main path of the vessel's level-set tree, a sinus only near
+///   the proximal end, maximum diameter with the branch ostia left out.
+pub const MEASUREMENT_VERSION: u32 = 2;
+
+fn first_measurement_version() -> u32 {
+    1
+}
+
+impl ShapeAnatomy {
+    /// Whether these values were measured by today's method.
+    pub fn is_current(&self) -> bool {
+        self.measurement_version == MEASUREMENT_VERSION
+    }
 }
 
 /// Measures a shape given in millimetres: [`super::measure_root`] first, falling back to
@@ -59,12 +83,9 @@ fn vessel_only(profile: &VesselMeasurements, root_error: Option<String>) -> Shap
         sinus_height_mm: None,
         ascending_mm: None,
         length_mm: profile.centreline_length_mm,
-        max_diameter_mm: profile
-            .stations
-            .iter()
-            .map(|s| s.equivalent_diameter_mm)
-            .fold(0.0, f64::max),
+        max_diameter_mm: profile.max_diameter_mm(),
         root_error,
+        measurement_version: MEASUREMENT_VERSION,
     }
 }
 
@@ -90,6 +111,21 @@ mod tests {
             a.max_diameter_mm >= root.stj_diameter_mm,
             "{a:?} {params:?}"
         );
+    }
+
+    #[test]
+    fn values_stored_without_a_version_are_from_the_first_method() {
+        let (_, mesh) = generate_root(3, 1, true);
+        let a = measure_shape(&mesh).unwrap();
+        assert!(a.is_current());
+        let mut stored = serde_json::to_value(&a).unwrap();
+        stored
+            .as_object_mut()
+            .unwrap()
+            .remove("measurement_version");
+        let old: ShapeAnatomy = serde_json::from_value(stored).unwrap();
+        assert_eq!(old.measurement_version, 1);
+        assert!(!old.is_current());
     }
 
     #[test]

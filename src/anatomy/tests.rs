@@ -61,6 +61,41 @@ fn a_long_branch_does_not_take_the_centreline_out_of_the_aorta() {
 }
 
 #[test]
+fn the_maximum_diameter_leaves_the_branch_ostia_out() {
+    // Branches reaching 25 mm above the arch: a plane within about 2 mm of a branch's axis
+    // cuts it to its tip.
+    let mesh = BranchedArch::mesh();
+    let measured = measure_vessel(&mesh, &MeasureOptions::default()).unwrap();
+    let diameter = 2.0 * BranchedArch::RADIUS;
+    // The shape does what it is for: planes through the ostia cut up into the branches.
+    let through_ostia = measured
+        .stations
+        .iter()
+        .map(|s| s.equivalent_diameter_mm)
+        .fold(0.0, f64::max);
+    assert!(through_ostia > 1.2 * diameter, "{through_ostia}");
+    // Without them the largest section is the tube's own (1 mm marching-cubes surface).
+    let max = shape::measure_shape(&mesh).unwrap().max_diameter_mm;
+    assert_eq!(max, measured.max_diameter_mm());
+    assert!((max - diameter).abs() < 0.6, "{max} against {diameter}");
+}
+
+#[test]
+fn an_elliptic_lumen_keeps_its_sections_in_the_maximum_diameter() {
+    // Semi-axes 12 and 9 (aspect 1.33), flat ends, 100 mm long.
+    let mesh = mesh_of(
+        |p| ((p[0] / 12.0).hypot(p[1] / 9.0) - 1.0).max((p[2].abs() - 50.0) / 9.0),
+        60.0,
+        121,
+    );
+    let measured = measure_vessel(&mesh, &MeasureOptions::default()).unwrap();
+    assert!(measured.stations.iter().all(Station::is_single_lumen));
+    let equivalent = 2.0 * (12.0f64 * 9.0).sqrt();
+    let max = measured.max_diameter_mm();
+    assert!((max - equivalent).abs() < 0.5, "{max} against {equivalent}");
+}
+
+#[test]
 fn an_aorta_without_a_sinus_is_not_a_root() {
     let err = measure_root(&BranchedArch::mesh()).unwrap_err();
     assert!(matches!(err, MeasureError::NotARoot(_)), "{err}");

@@ -88,13 +88,14 @@ fn summary(r: &Report) -> String {
     d.sort_by(f64::total_cmp);
     let q = |f: f64| d[((d.len() - 1) as f64 * f).round() as usize];
     let mut out = format!(
-        "{}\n  centreline length   {:.2} mm ({} stations)\n  equivalent diameter min {:.2}  median {:.2}  max {:.2} mm\n",
+        "{}\n  centreline length   {:.2} mm ({} stations)\n  equivalent diameter min {:.2}  median {:.2}  max {:.2} mm\n  maximum diameter    {:.2} mm (branch ostia left out)\n",
         r.mesh,
         r.vessel.centreline_length_mm,
         d.len(),
         q(0.0),
         q(0.5),
-        q(1.0)
+        q(1.0),
+        r.vessel.max_diameter_mm()
     );
     match (&r.root, &r.root_error) {
         (Some(m), _) => out.push_str(&format!(

@@ -14,13 +14,12 @@ use crate::db::{self, jobs::FinalStatus, references::ReferenceRow};
 use crate::geometry::normalize::UnitBallTransform;
 use crate::sdf::store::manifest::ModelManifest;
 use crate::stats::bootstrap::{BandTestConfig, Discount};
-use crate::validation::features::FeatureValues;
 use crate::validation::measures::MeasureSettings;
 use crate::validation::shapes::Progress;
 use crate::validation::sources::{ModelPopulations, mean_training_radius, model_populations};
 use crate::validation::table::parse_table;
 use crate::validation::{
-    AcceptanceCriteria, Dossier, Member, Newcomers, Population, ShapeInputs, ShapeSettings,
+    AcceptanceCriteria, Dossier, Newcomers, Population, ShapeInputs, ShapeSettings, StoredShape,
     Subject, ValidationInput, validate,
 };
 
@@ -249,7 +248,8 @@ pub(super) async fn run(
     Ok(())
 }
 
-/// The cohort's shapes in mm with the measurements stored when they were made.
+/// The cohort's shapes in mm with the measurements stored when they were made (measured
+/// again when an earlier method made them).
 async fn load_cohort(
     ctx: &JobContext,
     cohort: &db::cohorts::CohortRow,
@@ -262,7 +262,7 @@ async fn load_cohort(
             rows.len()
         );
     }
-    let mut members = Vec::with_capacity(rows.len());
+    let mut shapes = Vec::with_capacity(rows.len());
     for row in rows {
         let bytes = ctx
             .objects
@@ -275,20 +275,19 @@ async fn load_cohort(
             centre: [row.centre_x, row.centre_y, row.centre_z],
             radius: row.radius,
         };
-        members.push(Member {
+        shapes.push(StoredShape {
             name: format!("shape {}", row.shape_index),
-            features: FeatureValues::of_shape(
-                row.anatomy.as_ref().map(|a| &a.0),
-                row.area_mm2,
-                row.volume_mm3,
-            ),
-            surface_mm: Some(transform.mesh_to_mesh_units(&unit)),
+            surface_mm: transform.mesh_to_mesh_units(&unit),
+            anatomy: row.anatomy.map(|a| a.0),
+            area_mm2: row.area_mm2,
+            volume_mm3: row.volume_mm3,
         });
     }
-    Ok(Population {
-        label: format!("cohort {}", cohort.cohort_id),
-        members,
-    })
+    // Blocking: shapes measured by an earlier method are measured again.
+    let label = format!("cohort {}", cohort.cohort_id);
+    super::priority::spawn_background(move || Population::from_stored(label, shapes))
+        .await
+        .map_err(super::join_error)
 }
 
 /// Reads the reference and the model's training (and held-out) shapes. Blocking: the

@@ -180,6 +180,7 @@ mod tests {
             length_mm: 80.0,
             max_diameter_mm: 30.0,
             root_error: Some("no sinus".into()),
+            measurement_version: crate::anatomy::shape::MEASUREMENT_VERSION,
         };
         let v = FeatureValues::of_shape(Some(&vessel), 100.0, f64::NAN);
         assert_eq!(v.get(Feature::Anatomy(Measurement::Length)), Some(80.0));

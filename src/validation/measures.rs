@@ -23,6 +23,8 @@ use crate::stats::wasserstein::{ecdf_area, wasserstein_1};
 
 /// Histogram bins of a feature's plot.
 pub const FEATURE_BINS: usize = 20;
+/// Significance level the KS test must be able to reach to be reported.
+pub const KS_ALPHA: f64 = 0.05;
 /// Significance level at which TOST shows equivalence.
 pub const TOST_ALPHA: f64 = 0.05;
 
@@ -97,7 +99,13 @@ pub fn compare_feature(
     let cohort_summary = keep(n, "cohort", Summary::of(&a));
     let reference_summary = keep(n, "reference", Summary::of(&b));
     let histograms = keep(n, "histograms", CommonHistograms::new(&a, &b, FEATURE_BINS));
-    let ks = keep(n, "ks", ks_two_sample(&a, &b));
+    let ks = match ks_without_power(a.len(), b.len()) {
+        Some(why) => {
+            n.insert("ks".into(), why);
+            None
+        }
+        None => keep(n, "ks", ks_two_sample(&a, &b)),
+    };
     let wasserstein = keep(n, "wasserstein", wasserstein_1(&a, &b));
     let ecdf = keep(n, "ecdf_area", ecdf_area(&a, &b));
     let band = keep(n, "density_band", density_band_test(&a, &b, &settings.band));
@@ -136,6 +144,26 @@ pub fn compare_feature(
         cohort_values: a,
         reference_values: b,
     }
+}
+
+/// Why the KS test is not reported for samples of `n1` and `n2` values: when not even the
+/// most extreme outcome (every value of one sample below every value of the other) reaches
+/// p < [`KS_ALPHA`], the test cannot reject, and a p-value of 0.7 on 1 against 2 shapes
+/// would read as agreement.
+fn ks_without_power(n1: usize, n2: usize) -> Option<String> {
+    if n1 == 0 || n2 == 0 {
+        return None; // the test's own error names the empty sample
+    }
+    // Two of the C(n1 + n2, n1) equally likely orders give D = 1.
+    let (small, total) = (n1.min(n2), n1 + n2);
+    let orders = (1..=small).fold(1.0f64, |c, i| c * (total - small + i) as f64 / i as f64);
+    let smallest_p = (2.0 / orders).min(1.0);
+    (smallest_p >= KS_ALPHA).then(|| {
+        format!(
+            "too few shapes measured ({n1} in the cohort, {n2} in the reference): the smallest \
+             p-value the KS test can give is {smallest_p:.3}, so it cannot reject at {KS_ALPHA}"
+        )
+    })
 }
 
 /// The value of `r`, or none with the reason noted under `name`.
@@ -256,4 +284,70 @@ fn mahalanobis(
         cohort_q: cq,
         reference_q: rq,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::validation::Member;
+    use crate::validation::features::FeatureValues;
+
+    #[test]
+    fn ks_is_withheld_exactly_when_no_outcome_could_reject() {
+        for n1 in 1..=8 {
+            for n2 in 1..=45 {
+                // The most extreme outcome: the samples do not overlap.
+                let a: Vec<f64> = (0..n1).map(|i| i as f64).collect();
+                let b: Vec<f64> = (0..n2).map(|i| 100.0 + i as f64).collect();
+                let smallest = ks_two_sample(&a, &b).unwrap().p_value;
+                let withheld = ks_without_power(n1, n2).is_some();
+                // Off the boundary by a margin, so rounding cannot decide.
+                if (smallest - KS_ALPHA).abs() > 1e-9 {
+                    assert_eq!(withheld, smallest >= KS_ALPHA, "{n1} {n2}: p {smallest}");
+                }
+            }
+        }
+        assert!(ks_without_power(1, 2).is_some());
+        assert!(ks_without_power(4, 4).is_none());
+        assert!(ks_without_power(1, 40).is_none());
+    }
+
+    #[test]
+    fn a_feature_measured_on_too_few_shapes_says_why_instead_of_a_p_value() {
+        let population = |areas: &[f64]| Population {
+            label: "p".into(),
+            members: areas
+                .iter()
+                .map(|&a| Member {
+                    name: a.to_string(),
+                    surface_mm: None,
+                    features: FeatureValues::of_shape(None, a, 1.0),
+                })
+                .collect(),
+        };
+        let settings = MeasureSettings {
+            band: BandTestConfig {
+                resamples: 200,
+                ..BandTestConfig::default()
+            },
+            tost_margins: BTreeMap::new(),
+        };
+        let few = compare_feature(
+            Feature::Area,
+            &population(&[1.0]),
+            &population(&[2.0, 3.0]),
+            &settings,
+        );
+        assert!(few.ks.is_none());
+        let why = &few.not_computed["ks"];
+        assert!(why.contains("too few shapes measured (1 in the cohort, 2 in the reference)"));
+        assert!(few.wasserstein.is_some(), "the distances are still given");
+        let enough = compare_feature(
+            Feature::Area,
+            &population(&[1.0, 2.0, 3.0, 4.0]),
+            &population(&[5.0, 6.0, 7.0, 8.0]),
+            &settings,
+        );
+        assert!(enough.ks.is_some_and(|k| k.p_value < KS_ALPHA));
+    }
 }

@@ -27,7 +27,7 @@ pub mod table;
 
 pub use criteria::{AcceptanceCriteria, Criteria, Verdict};
 pub use features::Feature;
-pub use population::{Member, Population};
+pub use population::{Member, Population, StoredShape};
 pub use report::{Dossier, Subject, ValidationInput, ValidationReport, validate};
 pub use shapes::{Newcomers, Progress, ShapeInputs, ShapeSettings};
 

@@ -7,8 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 
-use super::features::FeatureValues;
-use super::population::{Member, Population};
+use super::population::{Population, StoredShape};
 use super::table::parse_table;
 use crate::cohort::ShapeRecord;
 use crate::sdf::data::holdout::load_split;
@@ -26,8 +25,9 @@ pub struct CohortFiles {
 }
 
 /// Reads a directory of generated shapes: with `shape_NNNN.json` records, each mesh is
-/// brought to mm by its record's transform and keeps the record's measurements; without
-/// records, every mesh is taken in mm and measured.
+/// brought to mm by its record's transform and keeps the record's measurements (measured
+/// again when an earlier method made them); without records, every mesh is taken in mm and
+/// measured.
 pub fn read_cohort_dir(dir: &Path) -> anyhow::Result<CohortFiles> {
     let label = format!("cohort {}", dir.display());
     let mut records: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -43,7 +43,7 @@ pub fn read_cohort_dir(dir: &Path) -> anyhow::Result<CohortFiles> {
             first_record: None,
         });
     }
-    let mut members = Vec::with_capacity(records.len());
+    let mut shapes = Vec::with_capacity(records.len());
     let mut first_record = None;
     for path in &records {
         let record: ShapeRecord = serde_json::from_slice(&std::fs::read(path)?)
@@ -53,22 +53,20 @@ pub fn read_cohort_dir(dir: &Path) -> anyhow::Result<CohortFiles> {
             "unit" => record.transform.mesh_to_mesh_units(&mesh),
             _ => mesh,
         };
-        members.push(Member {
+        shapes.push(StoredShape {
             name: path
                 .file_stem()
                 .map(|s| s.to_string_lossy().into_owned())
                 .unwrap_or_default(),
-            features: FeatureValues::of_shape(
-                record.anatomy.as_ref(),
-                record.area_mm2,
-                record.volume_mm3,
-            ),
-            surface_mm: Some(mesh_mm),
+            surface_mm: mesh_mm,
+            anatomy: record.anatomy.clone(),
+            area_mm2: record.area_mm2,
+            volume_mm3: record.volume_mm3,
         });
         first_record.get_or_insert(record);
     }
     Ok(CohortFiles {
-        population: Population { label, members },
+        population: Population::from_stored(label, shapes),
         first_record,
     })
 }

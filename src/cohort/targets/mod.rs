@@ -244,6 +244,7 @@ pub(crate) mod test_support {
             length_mm: length,
             max_diameter_mm: annulus.map_or(20.0, |a| a * 1.3),
             root_error: None,
+            measurement_version: crate::anatomy::shape::MEASUREMENT_VERSION,
         }
     }
 
