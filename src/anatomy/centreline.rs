@@ -193,10 +193,12 @@ pub fn refine(
             let (p, t) = line.frame_at(s);
             if let Some(section) = surface.wall_section_at(p, t) {
                 // A centroid far off the current point means the plane cuts a side branch or
-                // the section is lopsided: leave the station out rather than jump.
+                // the section is lopsided, and a section through a branch ostium has its
+                // centroid pulled towards the branch: leave the station out rather than jump
+                // (the smoothed line bridges the gap).
                 let shift = norm(sub(section.centroid, p));
                 let radius = (section.area / std::f64::consts::PI).sqrt();
-                if shift <= MAX_SHIFT * radius {
+                if shift <= MAX_SHIFT * radius && section.is_single_lumen() {
                     moved = moved.max(shift);
                     centres.push(section.centroid);
                 }

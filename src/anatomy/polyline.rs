@@ -52,19 +52,29 @@ impl Polyline {
     }
 
     /// Weighted least-squares quadratic through the vertices within `half_window` of `s`
-    /// (widened to hold at least four vertices), in the offset u = (arc length − s) / window.
-    /// A quadratic reproduces straight lines exactly and circular arcs to third order, so the
-    /// smoothing does not shorten bends noticeably.
+    /// (widened to hold at least four vertices, two on each side of `s` where the line has
+    /// them), in the offset u = (arc length − s) / window. A quadratic reproduces straight
+    /// lines exactly and circular arcs to third order, so the smoothing does not shorten
+    /// bends noticeably. The two-sided window matters where centre points are missing (a
+    /// run of sections through branch ostia): a fit to a cluster on one side of a gap would
+    /// extrapolate across it and can swing tens of millimetres off the vessel.
     #[allow(clippy::needless_range_loop)] // index loops mirror the normal equations
     pub fn local_fit(&self, s: f64, half_window: f64) -> Option<LocalQuadratic> {
         let n = self.points.len();
+        let before_s = self.cumulative.partition_point(|&c| c < s);
+        let wanted_before = 2.min(before_s);
+        let wanted_after = 2.min(n - before_s);
         let mut w = half_window.max(1e-9);
         let mut idx: Vec<usize>;
         loop {
             idx = (0..n)
                 .filter(|&i| (self.cumulative[i] - s).abs() <= w)
                 .collect();
-            if idx.len() >= 4.min(n) {
+            let before = idx.iter().filter(|&&i| i < before_s).count();
+            if idx.len() >= 4.min(n)
+                && before >= wanted_before
+                && idx.len() - before >= wanted_after
+            {
                 break;
             }
             w *= 1.5;

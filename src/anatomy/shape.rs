@@ -39,8 +39,9 @@ pub struct ShapeAnatomy {
 /// comparable with today's and are measured again before they are compared:
 /// - 1: centreline from the geodesically farthest vertex pair (it could end in a branch),
 ///   maximum diameter over every section;
-/// - 2: centreline along the main path of the vessel's level-set tree, a sinus only near
-///   the proximal end, maximum diameter with the branch ostia left out.
+/// - 2: centreline along the main path of the vessel's level-set tree, smoothed over
+///   windows with centre points on both sides (across runs of missing sections), a sinus
+///   only near the proximal end, maximum diameter with the branch ostia left out.
 pub const MEASUREMENT_VERSION: u32 = 2;
 
 fn first_measurement_version() -> u32 {

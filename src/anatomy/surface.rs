@@ -50,6 +50,14 @@ impl SectionLoop {
         feret_diameters(&convex_hull(&self.points))
     }
 
+    /// Whether the loop is the main lumen alone rather than a lumen merged with a branch
+    /// ostium (maximal Feret diameter at most [`super::SINGLE_LUMEN_MAX_ASPECT`] × the
+    /// minimal one).
+    pub fn is_single_lumen(&self) -> bool {
+        let (max, min) = self.feret();
+        max <= super::SINGLE_LUMEN_MAX_ASPECT * min
+    }
+
     /// Largest distance from the in-plane point `q` to the loop.
     pub fn max_distance_from(&self, q: [f64; 2]) -> f64 {
         self.points

@@ -122,3 +122,34 @@ fn a_widening_far_from_the_ends_is_not_a_sinus() {
     };
     assert!(why.contains("within 1 diameter of an end"), "{why}");
 }
+
+/// A straight line of centre points every 1 mm with a 22 mm run missing and, just after
+/// it, four noisy points (±0.8 mm) bunched within 1.7 mm, as at a run of sections through
+/// branch ostia.
+fn line_with_a_gap_and_a_noisy_cluster() -> polyline::Polyline {
+    let mut points: Vec<[f64; 3]> = (0..=40).map(|x| [x as f64, 0.0, 0.0]).collect();
+    points.extend([
+        [62.0, 0.0, 0.0],
+        [62.7, 0.8, 0.0],
+        [63.1, -0.6, 0.0],
+        [63.7, 0.5, 0.0],
+    ]);
+    points.extend((70..=120).map(|x| [x as f64, 0.0, 0.0]));
+    polyline::Polyline::new(points)
+}
+
+#[test]
+fn the_smoothed_line_bridges_a_gap_instead_of_extrapolating_a_cluster() {
+    let line = line_with_a_gap_and_a_noisy_cluster();
+    let gap_start = line.arc_lengths()[40];
+    let gap_end = line.arc_lengths()[41];
+    let mut s = gap_start;
+    while s <= gap_end {
+        let (p, _) = line.frame_at(s, 10.0);
+        assert!(
+            p[1].abs() < 1.0 && p[2].abs() < 1e-9,
+            "at s = {s:.1} the smoothed point {p:?} is off the line"
+        );
+        s += 0.25;
+    }
+}

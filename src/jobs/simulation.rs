@@ -236,9 +236,6 @@ async fn run(
     let made = task.await.map_err(join_error)??;
     let (result, kind, mesh_sha256) = made;
     let seconds = started.elapsed().as_secs_f64();
-    // The limit is the service's setting, not a property of the shape: not kept, so a
-    // service started with a higher limit makes the mesh.
-    let over_budget = matches!(result, Err(SimulationError::OverBudget { .. }));
     let (prepared, outcome) = match result {
         Ok(p) => {
             let s = p.to_stored();
@@ -256,6 +253,11 @@ async fn run(
                 error: error.clone(),
                 field: field.clone(),
             };
+            // The limit is the service's setting, not a property of the shape: not kept,
+            // so a service started with a higher limit makes the mesh.
+            if matches!(e, SimulationError::OverBudget { .. }) {
+                return Ok(failed);
+            }
             (failed, SimulationOutcome::Failed { error, field })
         }
     };
@@ -265,9 +267,6 @@ async fn run(
         software_version: crate::VERSION.to_owned(),
         seconds,
     };
-    if over_budget {
-        return Ok(prepared);
-    }
     // A result that cannot be kept (read-only database, full disk) is still the answer.
     if let Err(e) = db::simulations::put(pool, *shape_id, options, &row).await {
         tracing::warn!(shape_id, error = %e, "simulation mesh not stored");

@@ -340,7 +340,7 @@ async fn a_model_deleted_while_a_cohort_is_posted_is_a_409_and_stores_nothing() 
         String::from_utf8_lossy(&r.body)
     );
     assert_eq!(r.header("content-type"), Some("application/problem+json"));
-    let detail = r.json()["detail"].as_str().unwrap().to_owned();
+    let detail = r.detail();
     assert!(detail.contains("concurrent request"), "{detail}");
     // The whole submission was rolled back: the model (deleted inside the refused
     // transaction) is still there, and no cohort or job was stored.

@@ -316,7 +316,7 @@ async fn a_model_that_is_not_ready_cannot_be_fitted() {
     )
     .await;
     assert_eq!(r.status, StatusCode::CONFLICT, "{}", text(&r));
-    assert!(r.json()["detail"].as_str().unwrap().contains("training"));
+    assert!(r.detail().contains("training"));
 }
 
 #[tokio::test]
@@ -360,12 +360,7 @@ async fn queued_fit_and_training_jobs_are_cancelled_and_their_subjects_marked_fa
 
     let again = cancel(&app, &format!("/v1/jobs/{fit_job}/cancel")).await;
     assert_eq!(again.status, StatusCode::CONFLICT, "{}", text(&again));
-    assert!(
-        again.json()["detail"]
-            .as_str()
-            .unwrap()
-            .contains("cancelled")
-    );
+    assert!(again.detail().contains("cancelled"));
     for unknown in ["/v1/jobs/999/cancel", "/v1/jobs/abc/cancel"] {
         let r = cancel(&app, unknown).await;
         assert_eq!(r.status, StatusCode::NOT_FOUND, "{unknown}: {}", text(&r));

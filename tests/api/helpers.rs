@@ -68,6 +68,15 @@ impl TestResponse {
             .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&self.body)))
     }
 
+    /// The `detail` of a problem+json body (panics, showing the body, when there is none).
+    pub fn detail(&self) -> String {
+        let body = self.json();
+        match body["detail"].as_str() {
+            Some(detail) => detail.to_owned(),
+            None => panic!("no problem detail in {body}"),
+        }
+    }
+
     /// A header as text.
     pub fn header(&self, name: &str) -> Option<&str> {
         self.headers.get(name).and_then(|v| v.to_str().ok())
@@ -271,6 +280,20 @@ impl<E> TestApp<E> {
     /// GET.
     pub async fn get(&self, path: &str) -> TestResponse {
         self.request(Method::GET, path, &[], Bytes::new()).await
+    }
+
+    /// GETs `path` until its JSON body satisfies `holds` and returns that body; panics
+    /// with the last body after about 30 s (a guard against a hang, not a timing assertion).
+    pub async fn poll_json(&self, path: &str, holds: impl Fn(&Value) -> bool) -> Value {
+        let mut seen = Value::Null;
+        for _ in 0..6000 {
+            seen = self.get(path).await.json();
+            if holds(&seen) {
+                return seen;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+        }
+        panic!("GET {path} never reached the expected state; last: {seen}");
     }
 
     /// POST a JSON body.

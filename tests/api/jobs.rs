@@ -42,15 +42,8 @@ pub fn spawn_worker(
 
 /// Polls a cohort until its status is `want` (or fails after a few seconds).
 pub async fn wait_for_status(app: &TestApp, cohort: i64, want: &str) {
-    let mut seen = serde_json::Value::Null;
-    for _ in 0..1000 {
-        seen = app.get(&format!("/v1/cohorts/{cohort}")).await.json()["status"].clone();
-        if seen == want {
-            return;
-        }
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
-    panic!("cohort {cohort} is {seen}, never {want}");
+    app.poll_json(&format!("/v1/cohorts/{cohort}"), |c| c["status"] == want)
+        .await;
 }
 
 async fn job_of(app: &TestApp, cohort: i64) -> serde_json::Value {
@@ -183,12 +176,7 @@ async fn an_engine_panic_fails_the_job_and_the_worker_keeps_going() {
     ));
     let broken = app.create_cohort_ok(&cohort_body(3, 2)).await;
     let fine = app.create_cohort_ok(&cohort_body(2, 2)).await;
-    for _ in 0..5000 {
-        if app.get(&format!("/v1/cohorts/{fine}")).await.json()["status"] == "succeeded" {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(2)).await;
-    }
+    wait_for_status(&app, fine, "succeeded").await;
     let failed = job_of(&app, broken).await;
     assert_eq!(failed["status"], "failed");
     let error = failed["error"].as_str().unwrap();

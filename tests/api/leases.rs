@@ -246,18 +246,7 @@ async fn a_cancel_reaches_a_task_running_in_another_process() {
     assert_eq!(r.status, StatusCode::ACCEPTED);
     // This process runs nothing of it: the other worker learns at its next renewal.
     assert_eq!(r.json()["status"], "running");
-    let mut status = String::new();
-    for _ in 0..500 {
-        status = app.get(&format!("/v1/cohorts/{cohort}")).await.json()["status"]
-            .as_str()
-            .unwrap()
-            .to_owned();
-        if status == "cancelled" {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
-    assert_eq!(status, "cancelled");
+    crate::jobs::wait_for_status(&app, cohort, "cancelled").await;
     assert_eq!(app.count("shape").await, 1);
     assert_eq!(tasks::live_leases(&app.state.pool).await.unwrap(), 0);
     stop_tx.send(true).unwrap();

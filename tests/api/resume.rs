@@ -120,7 +120,7 @@ async fn only_failed_or_cancelled_cohorts_can_be_retried() {
         let r = retry(&app, id).await;
         assert_eq!(r.status, StatusCode::CONFLICT, "{id}");
         assert_eq!(r.header("content-type"), Some("application/problem+json"));
-        let detail = r.json()["detail"].as_str().unwrap().to_owned();
+        let detail = r.detail();
         assert!(detail.contains(state), "{detail}");
     }
     app.engine.release.store(true, Ordering::SeqCst);
@@ -128,7 +128,7 @@ async fn only_failed_or_cancelled_cohorts_can_be_retried() {
     app.run_pending_jobs().await;
     let r = retry(&app, running).await;
     assert_eq!(r.status, StatusCode::CONFLICT);
-    assert!(r.json()["detail"].as_str().unwrap().contains("succeeded"));
+    assert!(r.detail().contains("succeeded"));
     assert_eq!(cohort(&app, running).await["status"], "succeeded");
     assert_eq!(retry(&app, 999).await.status, StatusCode::NOT_FOUND);
 }

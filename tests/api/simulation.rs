@@ -321,13 +321,7 @@ async fn a_remesh_over_the_service_limit_is_refused_before_any_work_naming_remes
         problem_field(&r),
         (StatusCode::UNPROCESSABLE_ENTITY, "remesh_mm".into())
     );
-    assert!(
-        r.json()["detail"]
-            .as_str()
-            .unwrap()
-            .contains("over the limit"),
-        "{:?}",
-        r.json()
-    );
+    let detail = r.detail();
+    assert!(detail.contains("over the limit"), "{detail}");
     assert_eq!(app.count("shape_simulation").await, 0);
 }

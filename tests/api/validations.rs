@@ -562,16 +562,10 @@ async fn a_validation_cancelled_during_its_chamfer_distances_stops_there() {
     let validation = r.json();
     let path = format!("/v1/validations/{}", validation["id"]);
     let (worker, stop) = crate::jobs::spawn_worker(&app);
-    let mut seen = Value::Null;
-    for _ in 0..6000 {
-        seen = app.get(&path).await.json();
-        if seen["progress"]["done"].as_i64().unwrap_or(0) > 0 {
-            break;
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
-    }
+    let seen = app
+        .poll_json(&path, |v| v["progress"]["done"].as_i64().unwrap_or(0) > 0)
+        .await;
     let total = seen["progress"]["total"].as_i64().unwrap();
-    assert!(seen["progress"]["done"].as_i64().unwrap() > 0, "{seen}");
     let r = app
         .request(
             Method::POST,
@@ -586,14 +580,7 @@ async fn a_validation_cancelled_during_its_chamfer_distances_stops_there() {
         "{}",
         String::from_utf8_lossy(&r.body)
     );
-    for _ in 0..6000 {
-        seen = app.get(&path).await.json();
-        if seen["status"] == "cancelled" {
-            break;
-        }
-        tokio::time::sleep(std::time::Duration::from_millis(5)).await;
-    }
-    assert_eq!(seen["status"], "cancelled", "{seen}");
+    let seen = app.poll_json(&path, |v| v["status"] == "cancelled").await;
     assert!(
         seen["report"].is_null() && seen["verdict"].is_null(),
         "{seen}"

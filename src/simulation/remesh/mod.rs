@@ -28,14 +28,18 @@ pub const TARGET_RANGE_MM: (f64, f64) = (0.1, 10.0);
 /// an equilateral triangle's. The remesh's time and memory grow with it, so services bound
 /// it before starting.
 pub fn expected_triangles(area_mm2: f64, target_mm: f64) -> u64 {
-    let triangle = 3f64.sqrt() / 4.0 * target_mm * target_mm;
-    (area_mm2.max(0.0) / triangle).ceil() as u64
+    (area_mm2.max(0.0) / equilateral_area(target_mm)).ceil() as u64
+}
+
+/// Area of an equilateral triangle with edge `edge_mm`: √3/4 · L².
+fn equilateral_area(edge_mm: f64) -> f64 {
+    3f64.sqrt() / 4.0 * edge_mm * edge_mm
 }
 
 /// The finest target edge length, to 0.01 mm, whose remesh of `area_mm2` makes at most
 /// `max_triangles` triangles.
 pub fn finest_target_mm(area_mm2: f64, max_triangles: u64) -> f64 {
-    let edge = (area_mm2.max(0.0) / (3f64.sqrt() / 4.0 * max_triangles.max(1) as f64)).sqrt();
+    let edge = (area_mm2.max(0.0) / (equilateral_area(1.0) * max_triangles.max(1) as f64)).sqrt();
     let mut hundredths = (edge * 100.0).ceil();
     while expected_triangles(area_mm2, hundredths / 100.0) > max_triangles {
         hundredths += 1.0;
