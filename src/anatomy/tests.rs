@@ -80,6 +80,32 @@ fn the_maximum_diameter_leaves_the_branch_ostia_out() {
     assert!((max - diameter).abs() < 0.6, "{max} against {diameter}");
 }
 
+/// The centreline of an arch with supra-aortic branches stays on the main axis where the
+/// sections cut the ostia, instead of being pulled towards a branch.
+#[test]
+fn the_centreline_runs_straight_past_the_branch_ostia() {
+    let mesh = BranchedArch::mesh();
+    let measured = measure_vessel(&mesh, &MeasureOptions::default()).unwrap();
+    let stations = &measured.stations;
+    let cap = BranchedArch::RADIUS;
+    let length = measured.centreline_length_mm;
+    for s in stations
+        .iter()
+        .filter(|s| s.s_mm > cap && s.s_mm < length - cap)
+    {
+        let off = BranchedArch::main_axis_distance(s.centre, 50.0);
+        assert!(
+            off < 0.5,
+            "station at {:.1} mm is {off:.2} mm off the axis",
+            s.s_mm
+        );
+    }
+    // Legs of 20 and 50 mm and a half-circle arch of radius 30, plus up to a radius into
+    // each rounded cap: a line that wiggled into the branches would be longer.
+    let axis = 20.0 + 50.0 + std::f64::consts::PI * BranchedArch::ARCH;
+    assert!(length > axis && length < axis + 2.0 * cap + 1.0, "{length}");
+}
+
 #[test]
 fn an_elliptic_lumen_keeps_its_sections_in_the_maximum_diameter() {
     // Semi-axes 12 and 9 (aspect 1.33), flat ends, 100 mm long.
