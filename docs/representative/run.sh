@@ -60,6 +60,8 @@ cohort pca --sampler pca-gaussian
 cohort pca-t3 --sampler pca-gaussian --truncation 3
 cohort pca-t2 --sampler pca-gaussian --truncation 2
 cohort pca-t1.5 --sampler pca-gaussian --truncation 1.5
+cohort pca-s1.1 --sampler pca-gaussian --sigma-scale 1.1
+cohort pca-s1.2 --sampler pca-gaussian --sigma-scale 1.2
 cohort gmm-k2 --sampler pca-mixture --components 2
 cohort gmm-k4 --sampler pca-mixture --components 4
 cohort gmm-bic --sampler pca-mixture --max-components 4
@@ -76,6 +78,6 @@ validate() { # NAME REFERENCE
         --seed "$seed" --json "$report.json" --out "$report.html" > "$report.log" 2>&1
 }
 mkdir -p "$out/validation"
-cohorts=(convex-a2 convex-a4 convex-a8 convex-a4-noise1 pca pca-t3 pca-t2 pca-t1.5 gmm-k2 gmm-k4 gmm-bic)
+cohorts=(convex-a2 convex-a4 convex-a8 convex-a4-noise1 pca pca-t3 pca-t2 pca-t1.5 pca-s1.1 pca-s1.2 gmm-k2 gmm-k4 gmm-bic)
 for name in "${cohorts[@]}"; do validate "$name" heldout; done
 for name in "${cohorts[@]}"; do validate "$name" training; done

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 COHORTS = ["convex-a2", "convex-a4", "convex-a8", "convex-a4-noise1", "pca", "pca-t3",
-           "pca-t2", "pca-t1.5", "gmm-k2", "gmm-k4", "gmm-bic"]
+           "pca-t2", "pca-t1.5", "pca-s1.1", "pca-s1.2", "gmm-k2", "gmm-k4", "gmm-bic"]
 
 
 def load(directory, name, reference):
@@ -26,6 +26,30 @@ def shape_row(name, r):
             f"| {cov['cov_subsets']['mean']:.3f}{real} "
             f"| {pw['median_ratio']:.3f} | {ratio:.3f} | {dcr['near_copies'] if dcr else '—'} "
             f"| {len(rejected)}: {', '.join(rejected) or '—'} | {r['verdict']} |")
+
+
+def feature(r, name):
+    return next((f for f in r["features"] if f["feature"] == name), None)
+
+
+def ks_p(f):
+    return f"{f['ks']['p_value']:.3f}" if f and f["ks"] else "—"
+
+
+def measurement_row(name, r):
+    """Length (mean) and maximum diameter (median), cohort against reference, with KS p;
+    area and volume KS p; the features without a KS test (too few shapes measured)."""
+    cells = [name]
+    for key, stat in [("length_mm", "mean"), ("max_diameter_mm", "median")]:
+        f = feature(r, key)
+        if f and f["cohort"] and f["reference"]:
+            cells.append(f"{f['cohort'][stat]:.1f} / {f['reference'][stat]:.1f} ({ks_p(f)})")
+        else:
+            cells.append("—")
+    cells.append(f"{ks_p(feature(r, 'area_mm2'))}, {ks_p(feature(r, 'volume_mm3'))}")
+    withheld = [f["feature"] for f in r["features"] if "ks" in f["not_computed"]]
+    cells.append(", ".join(withheld) or "—")
+    return "| " + " | ".join(cells) + " |"
 
 
 def main(directory):
@@ -49,6 +73,14 @@ def main(directory):
                   f"COV {b['coverage']['cov_subsets']['mean']:.3f}, "
                   f"pairwise median ratio {b['pairwise_median_ratio']:.3f}; sampling floor "
                   f"{first['shapes']['sampling_floor']:.3e}.")
+        print(f"\n#### Measurements against the {reference} shapes\n")
+        print("| cohort | length mean mm, cohort / reference (KS p) "
+              "| max diameter median mm, cohort / reference (KS p) | area, volume KS p "
+              "| KS not computed |\n|---|---|---|---|---|")
+        for name in COHORTS:
+            r = load(directory, name, reference)
+            if r is not None:
+                print(measurement_row(name, r))
 
 
 if __name__ == "__main__":
