@@ -23,22 +23,8 @@ fn a_long_branch_does_not_take_the_centreline_out_of_the_aorta() {
     assert!(off_axis > 20.0, "{off_axis}");
 
     let measured = measure_vessel(&mesh, &MeasureOptions::default()).unwrap();
+    assert_on_the_main_axis(&measured, BranchedArch::LONG_BRANCHES_DESCENDING, 1.5);
     let stations = &measured.stations;
-    // Inside the rounded end caps the centreline runs past the ends of the axis.
-    let length = measured.centreline_length_mm;
-    let cap = BranchedArch::RADIUS;
-    for s in stations
-        .iter()
-        .filter(|s| s.s_mm > cap && s.s_mm < length - cap)
-    {
-        let off =
-            BranchedArch::main_axis_distance(s.centre, BranchedArch::LONG_BRANCHES_DESCENDING);
-        assert!(
-            off < 1.5,
-            "station at {:.1} mm is {off:.2} mm off the axis",
-            s.s_mm
-        );
-    }
     // From one main end round the arch to the other, each reached to within its 9 mm
     // rounded cap.
     let descending_end = [
@@ -53,10 +39,29 @@ fn a_long_branch_does_not_take_the_centreline_out_of_the_aorta() {
             || (near(first, descending_end) && near(last, ASCENDING_END)),
         "{first:?} {last:?}"
     );
-    // Legs of 20 and 50 mm and a half-circle arch of radius 30, plus up to a radius into
-    // each rounded cap (and 1 mm for the 1 mm marching-cubes surface).
-    let axis =
-        20.0 + BranchedArch::LONG_BRANCHES_DESCENDING + std::f64::consts::PI * BranchedArch::ARCH;
+}
+
+/// Every station outside the rounded end caps (where the centreline runs past the ends of
+/// the axis) lies within `tolerance` mm of the arch's main axis, and the length is the
+/// axis's: legs of 20 and `descending` mm and a half-circle arch of radius 30, plus up to a
+/// radius into each cap (and 1 mm for the 1 mm marching-cubes surface). A line that
+/// wiggled into the branches would be off the axis and longer.
+fn assert_on_the_main_axis(measured: &VesselMeasurements, descending: f64, tolerance: f64) {
+    let length = measured.centreline_length_mm;
+    let cap = BranchedArch::RADIUS;
+    for s in measured
+        .stations
+        .iter()
+        .filter(|s| s.s_mm > cap && s.s_mm < length - cap)
+    {
+        let off = BranchedArch::main_axis_distance(s.centre, descending);
+        assert!(
+            off < tolerance,
+            "station at {:.1} mm is {off:.2} mm off the axis",
+            s.s_mm
+        );
+    }
+    let axis = 20.0 + descending + std::f64::consts::PI * BranchedArch::ARCH;
     assert!(length > axis && length < axis + 2.0 * cap + 1.0, "{length}");
 }
 
@@ -84,26 +89,8 @@ fn the_maximum_diameter_leaves_the_branch_ostia_out() {
 /// sections cut the ostia, instead of being pulled towards a branch.
 #[test]
 fn the_centreline_runs_straight_past_the_branch_ostia() {
-    let mesh = BranchedArch::mesh();
-    let measured = measure_vessel(&mesh, &MeasureOptions::default()).unwrap();
-    let stations = &measured.stations;
-    let cap = BranchedArch::RADIUS;
-    let length = measured.centreline_length_mm;
-    for s in stations
-        .iter()
-        .filter(|s| s.s_mm > cap && s.s_mm < length - cap)
-    {
-        let off = BranchedArch::main_axis_distance(s.centre, 50.0);
-        assert!(
-            off < 0.5,
-            "station at {:.1} mm is {off:.2} mm off the axis",
-            s.s_mm
-        );
-    }
-    // Legs of 20 and 50 mm and a half-circle arch of radius 30, plus up to a radius into
-    // each rounded cap: a line that wiggled into the branches would be longer.
-    let axis = 20.0 + 50.0 + std::f64::consts::PI * BranchedArch::ARCH;
-    assert!(length > axis && length < axis + 2.0 * cap + 1.0, "{length}");
+    let measured = measure_vessel(&BranchedArch::mesh(), &MeasureOptions::default()).unwrap();
+    assert_on_the_main_axis(&measured, BranchedArch::DESCENDING, 0.5);
 }
 
 #[test]

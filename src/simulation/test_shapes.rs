@@ -94,6 +94,8 @@ impl BranchedArch {
     pub(crate) const BRANCH_RADIUS: f64 = 4.0;
     /// Arch centreline radius.
     pub(crate) const ARCH: f64 = 30.0;
+    /// Descending leg of [`BranchedArch::mesh`], mm.
+    pub(crate) const DESCENDING: f64 = 50.0;
 
     /// Where branch `k` leaves the arch centreline and its unit direction (upward, radial
     /// from the arch centre).
@@ -120,7 +122,7 @@ impl BranchedArch {
 
     /// The signed distance (approximately Euclidean; negative inside).
     pub(crate) fn sdf(p: [f64; 3]) -> f64 {
-        Self::sdf_with(p, 50.0, 25.0)
+        Self::sdf_with(p, Self::DESCENDING, 25.0)
     }
 
     /// The signed distance of the arch with a descending leg of `descending` mm and
