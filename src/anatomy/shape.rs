@@ -44,7 +44,8 @@ pub struct ShapeAnatomy {
 ///   only near the proximal end, maximum diameter with the branch ostia left out.
 pub const MEASUREMENT_VERSION: u32 = 2;
 
-fn first_measurement_version() -> u32 {
+/// The version of records written before the method had versions (serde's default).
+pub(crate) fn first_measurement_version() -> u32 {
     1
 }
 

@@ -8,7 +8,7 @@ use super::progress::{init_logging, terminal_bar};
 use crate::formats::{MeshMetadata, write_mesh_file};
 use crate::geometry::TriMesh;
 use crate::geometry::chamfer::DEFAULT_CHAMFER_POINTS;
-use crate::render::{View, encode_png, render_meshes};
+use crate::render::{MAX_SIDE, View, encode_png, render_meshes};
 use crate::sdf::backend::Backend;
 use crate::sdf::data::DataSource;
 use crate::sdf::data::holdout::load_split;
@@ -46,7 +46,8 @@ pub struct EvaluateArgs {
     /// as PLY in mesh units, and `worst.png` with the originals above their reconstructions.
     #[arg(long)]
     pub worst: Option<PathBuf>,
-    /// How many of the worst shapes --worst shows.
+    /// How many of the worst shapes --worst shows (1–256, checked with --worst; the
+    /// picture's cells shrink below 480 px when more than 17 are shown).
     #[arg(long, default_value_t = 3)]
     pub worst_count: usize,
     /// Adam steps of each held-out shape's fit (models trained with --holdout; 0 skips
@@ -70,6 +71,11 @@ pub fn run(args: EvaluateArgs) -> anyhow::Result<()> {
         "--resolution must be between {MIN_RESOLUTION} and {MAX_RESOLUTION}"
     );
     ensure!(args.points >= 1, "--points must be at least 1");
+    ensure!(
+        args.worst.is_none() || (1..=MAX_WORST_COUNT).contains(&args.worst_count),
+        "--worst-count must be between 1 and {MAX_WORST_COUNT}, got {}",
+        args.worst_count
+    );
     let model = LoadedModel::load(&args.model, args.backend)?;
     let source = match &args.data {
         Some(path) => DataSource::Directory { path: path.clone() },
@@ -155,6 +161,15 @@ fn fit_heldout(
     evaluation
 }
 
+/// Most shapes `worst.png` shows: its width holds one cell of at least 32 px per shape.
+pub const MAX_WORST_COUNT: usize = (MAX_SIDE / 32) as usize;
+
+/// Side of one cell of `worst.png`, px, for `count` cells in a row (1..=[`MAX_WORST_COUNT`]):
+/// 480, or less so the row fits the largest image the renderer draws.
+fn worst_cell_side(count: usize) -> u32 {
+    480.min(MAX_SIDE / count as u32)
+}
+
 /// Writes the `count` shapes of largest Chamfer distance, worst first, as
 /// `{rank}_{name}_original.ply` / `_reconstruction.ply` (mesh units) and `worst.png`.
 fn write_worst(
@@ -209,7 +224,7 @@ fn write_worst(
         columns: Some(ranked.len()),
         ..View::default()
     };
-    let side = 480;
+    let side = worst_cell_side(ranked.len());
     let image = render_meshes(&shown, side * ranked.len() as u32, 2 * side, &view)?;
     let path = dir.join("worst.png");
     std::fs::write(&path, encode_png(&image)?)
@@ -273,6 +288,24 @@ fn print_summary(report: &EvaluationReport) {
                 "    {}: {}",
                 shape.name,
                 shape.error.as_deref().unwrap_or("?")
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_worst_picture_fits_the_renderer_for_every_allowed_count() {
+        assert_eq!(worst_cell_side(2), 480);
+        for count in 1..=MAX_WORST_COUNT {
+            let side = worst_cell_side(count);
+            assert!(side >= 32, "{count}: {side} px");
+            assert!(
+                side as usize * count <= MAX_SIDE as usize,
+                "{count}: {side} px"
             );
         }
     }

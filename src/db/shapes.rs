@@ -370,3 +370,70 @@ pub async fn count_all(pool: &super::Pool) -> sqlx::Result<i64> {
         .fetch_one(pool)
         .await
 }
+
+/// A stored shape's measurements and where its mesh is, for measuring it again.
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct MeasuredShape {
+    /// Shape id.
+    pub shape_id: i64,
+    /// Hex SHA-256 of the encoded unit-ball mesh.
+    pub mesh_sha256: String,
+    /// Transform centre x.
+    pub centre_x: f64,
+    /// Transform centre y.
+    pub centre_y: f64,
+    /// Transform centre z.
+    pub centre_z: f64,
+    /// Transform scale.
+    pub radius: f64,
+    /// Anatomical measurements.
+    pub anatomy: Option<Json<ShapeAnatomy>>,
+    /// Why the measurements failed.
+    pub anatomy_error: Option<String>,
+}
+
+impl MeasuredShape {
+    /// Where its mesh is.
+    pub fn mesh_ref(&self) -> MeshRef {
+        MeshRef {
+            shape_id: self.shape_id,
+            mesh_sha256: self.mesh_sha256.clone(),
+            centre_x: self.centre_x,
+            centre_y: self.centre_y,
+            centre_z: self.centre_z,
+            radius: self.radius,
+        }
+    }
+}
+
+/// Up to `limit` shapes with ids above `after`, in id order, with their measurements.
+pub async fn measurements_after(
+    pool: &super::Pool,
+    after: i64,
+    limit: i64,
+) -> sqlx::Result<Vec<MeasuredShape>> {
+    sqlx::query_as(
+        "select shape_id, mesh_sha256, centre_x, centre_y, centre_z, radius, anatomy,
+             anatomy_error
+         from shape where shape_id > $1 order by shape_id limit $2",
+    )
+    .bind(after)
+    .bind(limit)
+    .fetch_all(pool)
+    .await
+}
+
+/// Replaces a shape's measurements, or the reason they failed; false when the shape is gone.
+pub async fn set_anatomy<'e>(
+    ex: impl super::Executor<'e>,
+    shape_id: i64,
+    anatomy: Result<&ShapeAnatomy, &str>,
+) -> sqlx::Result<bool> {
+    let done = sqlx::query("update shape set anatomy = $1, anatomy_error = $2 where shape_id = $3")
+        .bind(anatomy.ok().map(Json))
+        .bind(anatomy.err())
+        .bind(shape_id)
+        .execute(ex)
+        .await?;
+    Ok(done.rows_affected() == 1)
+}

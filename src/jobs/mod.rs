@@ -10,6 +10,7 @@ pub mod fit;
 pub mod lifecycle;
 pub mod priority;
 pub mod queue;
+pub mod remeasure;
 pub mod setup;
 pub mod simulation;
 pub mod stats;

@@ -79,14 +79,15 @@ pub async fn novelty_reference(
 /// first uses) wait for the same result instead of computing it twice.
 static MEASURING: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
-/// The model's stored training-shape measurements, when they cover all `count` shapes.
+/// The model's stored training-shape measurements, when they cover all `count` shapes and
+/// were taken by today's method (older ones are measured again and replaced).
 pub async fn stored_training_anatomy(
     pool: &db::Pool,
     model_id: &str,
     count: usize,
 ) -> anyhow::Result<Option<TrainingAnatomy>> {
     let stored = db::models::training_anatomy(pool, model_id).await?;
-    Ok(stored.filter(|s| s.shapes.len() == count))
+    Ok(stored.filter(|s| s.shapes.len() == count && s.is_current()))
 }
 
 /// The model's training-shape measurements: stored ones, or computed off the executor and

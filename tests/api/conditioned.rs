@@ -3,13 +3,13 @@
 
 use std::sync::atomic::Ordering;
 
-use aortagen::anatomy::shape::measure_shape;
+use aortagen::anatomy::shape::{MEASUREMENT_VERSION, measure_shape};
 use aortagen::geometry::normalize::UnitBallTransform;
 use axum::http::StatusCode;
 use serde_json::json;
 
 use crate::engine::{AnalyticEngine, CENTRE_MM, TRAINING_SHAPES, ellipsoid_unit, training_axes};
-use crate::helpers::{cohort_body, cohort_body_with, spawn_app, spawn_on_configured};
+use crate::helpers::{MODEL, cohort_body, cohort_body_with, spawn_app, spawn_on_configured};
 
 /// Centreline lengths (mm) of the analytic training ellipsoids, measured as the service
 /// measures them.
@@ -126,6 +126,57 @@ async fn an_impossible_target_is_refused_with_the_achievable_range() {
     let r = app.create_cohort(&body).await;
     assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
     assert_eq!(app.engine.calls.load(Ordering::SeqCst), calls);
+}
+
+#[tokio::test]
+async fn training_measurements_of_an_earlier_method_are_taken_again() {
+    let app = spawn_app().await;
+    let lengths = training_lengths();
+    let longest = lengths.iter().cloned().fold(0.0, f64::max);
+    let body = cohort_body_with(json!({ "targets": { "length_mm": { "min": longest * 1.06 } } }));
+    let r = app.create_cohort(&body).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    let calls = app.engine.calls.load(Ordering::SeqCst);
+    // The stored record as an earlier method left it: no version, other lengths.
+    let pool = &app.state.pool;
+    let mut stored = aortagen::db::models::training_anatomy(pool, MODEL)
+        .await
+        .unwrap()
+        .expect("measured by the first request");
+    assert_eq!(stored.measurement_version, MEASUREMENT_VERSION);
+    let mut old = serde_json::to_value(&stored).unwrap();
+    old.as_object_mut().unwrap().remove("measurement_version");
+    for shape in old["shapes"].as_array_mut().unwrap() {
+        shape.as_object_mut().unwrap().remove("measurement_version");
+        shape["length_mm"] = json!(10.0 * longest);
+    }
+    stored = serde_json::from_value(old).unwrap();
+    assert_eq!(stored.measurement_version, 1);
+    aortagen::db::models::set_training_anatomy(pool, MODEL, &stored)
+        .await
+        .unwrap();
+    // Against the old lengths the target would be feasible; today's measure refuses it.
+    let r = app.create_cohort(&body).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert_eq!(r.json()["rule"], "feasible");
+    assert_eq!(
+        app.engine.calls.load(Ordering::SeqCst),
+        calls + TRAINING_SHAPES,
+        "every training shape measured again"
+    );
+    let again = aortagen::db::models::training_anatomy(pool, MODEL)
+        .await
+        .unwrap()
+        .unwrap();
+    assert_eq!(again.measurement_version, MEASUREMENT_VERSION);
+    assert!(
+        again
+            .shapes
+            .iter()
+            .flatten()
+            .all(|a| a.length_mm < 2.0 * longest)
+    );
+    assert_eq!(app.count("cohort").await, 0);
 }
 
 #[tokio::test]

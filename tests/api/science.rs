@@ -271,3 +271,69 @@ async fn every_shape_carries_its_anatomy_or_the_reason_and_the_metrics_summarise
         assert!((anatomy["length_mm"]["mean"].as_f64().unwrap() - mean).abs() < 1e-9 * mean);
     }
 }
+
+#[tokio::test]
+async fn remeasuring_brings_stored_measurements_of_an_earlier_method_to_todays() {
+    use aortagen::anatomy::shape::{MEASUREMENT_VERSION, ShapeAnatomy};
+    use aortagen::jobs::remeasure::{RemeasureCounts, remeasure_stored_shapes};
+    let app = spawn_app().await;
+    let id = app.create_cohort_ok(&cohort_body(4, 2)).await;
+    app.run_pending_jobs().await;
+    let today = app.shape_details(id).await;
+    let pool = &app.state.pool;
+    // As an earlier method left them: measured shapes without a version and with other
+    // lengths; one shape with a failure's reason instead.
+    let mut measured = 0;
+    for (i, shape) in today.iter().enumerate() {
+        let shape_id = shape["id"].as_i64().unwrap();
+        let old = match (i, &shape["anatomy"]) {
+            (0, _) | (_, Value::Null) => Err("no centreline (earlier method)"),
+            (_, anatomy) => {
+                measured += 1;
+                let mut a = anatomy.clone();
+                a.as_object_mut().unwrap().remove("measurement_version");
+                a["length_mm"] = json!(12345.0);
+                Ok(serde_json::from_value::<ShapeAnatomy>(a).unwrap())
+            }
+        };
+        assert!(
+            aortagen::db::shapes::set_anatomy(pool, shape_id, old.as_ref().map_err(|e| *e))
+                .await
+                .unwrap()
+        );
+    }
+    assert!(measured > 0, "the analytic shapes measure: {today:?}");
+    let metrics = app.get(&format!("/v1/cohorts/{id}/metrics")).await.json();
+    assert_eq!(metrics["anatomy"]["length_mm"]["max"], 12345.0, "{metrics}");
+
+    let mut seen = Vec::new();
+    let counts = remeasure_stored_shapes(pool, &app.state.jobs.objects, &mut |c| seen.push(*c))
+        .await
+        .unwrap();
+    assert_eq!(counts.examined, today.len() as u64);
+    assert_eq!((counts.current, counts.unreadable), (0, 0), "{counts:?}");
+    assert_eq!(counts.measured + counts.failed, today.len() as u64);
+    assert_eq!(seen.last(), Some(&counts));
+    // Every shape reads as it did when it was made, the failed one included.
+    assert_eq!(app.shape_details(id).await, today);
+    for shape in &today {
+        if let Value::Object(a) = &shape["anatomy"] {
+            assert_eq!(a["measurement_version"], MEASUREMENT_VERSION);
+        }
+    }
+    // A second pass finds nothing to do but the shapes that cannot be measured.
+    let failing = today.iter().filter(|s| s["anatomy"].is_null()).count() as u64;
+    let again = remeasure_stored_shapes(pool, &app.state.jobs.objects, &mut |_| {})
+        .await
+        .unwrap();
+    assert_eq!(
+        again,
+        RemeasureCounts {
+            examined: today.len() as u64,
+            current: today.len() as u64 - failing,
+            measured: 0,
+            failed: failing,
+            unreadable: 0,
+        }
+    );
+}

@@ -8,7 +8,9 @@ use serde::{Deserialize, Serialize};
 
 use super::{TargetRange, Targets};
 use crate::anatomy::measurement::Measurement;
-use crate::anatomy::shape::{ShapeAnatomy, measure_shape};
+use crate::anatomy::shape::{
+    MEASUREMENT_VERSION, ShapeAnatomy, first_measurement_version, measure_shape,
+};
 use crate::engine::{Engine, GeneratedShape, ShapeSpec};
 
 /// Grid resolution of the coarse extraction candidates are screened with and the training
@@ -25,8 +27,19 @@ pub const FEASIBILITY_MARGIN: f64 = 0.05;
 pub struct TrainingAnatomy {
     /// Grid resolution they were meshed at.
     pub resolution: usize,
+    /// The measurement method's version ([`MEASUREMENT_VERSION`]); 1 when absent (stored
+    /// before the method had versions). Measurements of another version are taken again.
+    #[serde(default = "first_measurement_version")]
+    pub measurement_version: u32,
     /// One entry per training shape; null where the shape could not be measured.
     pub shapes: Vec<Option<ShapeAnatomy>>,
+}
+
+impl TrainingAnatomy {
+    /// Whether these values were measured by today's method.
+    pub fn is_current(&self) -> bool {
+        self.measurement_version == MEASUREMENT_VERSION
+    }
 }
 
 /// Meshes and measures each of the `count` training shapes of the model in `model_dir` at
@@ -49,6 +62,7 @@ pub fn measure_training_shapes(
         .collect::<anyhow::Result<_>>()?;
     Ok(TrainingAnatomy {
         resolution: SCREEN_RESOLUTION,
+        measurement_version: MEASUREMENT_VERSION,
         shapes,
     })
 }
