@@ -1,6 +1,8 @@
-"""Tables of docs/representative/README.md from the validation reports run.sh writes.
+"""Tables of docs/representative/README.md from the validation reports run.sh writes, and
+the noise table from those noise.sh writes.
 
     python3 docs/representative/table.py OUT_DIR/validation
+    python3 docs/representative/table.py --noise OUT_DIR/noise
 """
 import json
 import sys
@@ -83,5 +85,52 @@ def main(directory):
                 print(measurement_row(name, r))
 
 
+# (row label, report stem, cohort seed, mesh resolution, evaluation seed) of noise.sh's reports;
+# a stem of None is run.sh's own report at 10 000 points, found in VALIDATION_10K.
+NOISE_ROWS = [
+    ("gmm-k2", "gmm-k2-c2027-v2026", 2027, 64, 2026),
+    ("gmm-k2", "gmm-k2-c2028-v2026", 2028, 64, 2026),
+    ("gmm-k2", "gmm-k2-r128-v2026", 2026, 128, 2026),
+    ("gmm-k2", "gmm-k2-v2027", 2026, 64, 2027),
+    ("gmm-k2", "gmm-k2-v2028", 2026, 64, 2028),
+    ("pca", "pca-c2027-v2026", 2027, 64, 2026),
+    ("pca", "pca-c2028-v2026", 2028, 64, 2026),
+    ("pca-s1.1", "pca-s1.1-c2027-v2026", 2027, 64, 2026),
+    ("pca-s1.1", "pca-s1.1-c2028-v2026", 2028, 64, 2026),
+    ("pca-s1.1", "pca-s1.1-r128-v2026", 2026, 128, 2026),
+    ("pca-s1.1", "pca-s1.1-v2027", 2026, 64, 2027),
+    ("pca-s1.1", "pca-s1.1-v2028", 2026, 64, 2028),
+    ("pca-t1.5, σ × 1.346", "pca-t1.5-s1.346-v2026", 2026, 64, 2026),
+    ("pca-t2, σ × 1.137", "pca-t2-s1.137-v2026", 2026, 64, 2026),
+    ("training reconstructions", "reconstructions-64-v2026", "—", 64, 2026),
+    ("training reconstructions", "reconstructions-64-v2027", "—", 64, 2027),
+    ("training reconstructions", "reconstructions-64-v2028", "—", 64, 2028),
+    ("training reconstructions", "reconstructions-128-v2026", "—", 128, 2026),
+]
+
+
+def noise(directory):
+    print("| cohort | cohort seed | mesh | evaluation seed | 1-NNA | COV | real-vs-real COV "
+          "| pairwise median ratio | DCR median ratio | lowest KS p |\n"
+          "|---|---|---|---|---|---|---|---|---|---|")
+    for label, stem, cohort_seed, resolution, evaluation_seed in NOISE_ROWS:
+        path = Path(directory) / f"{stem}.json"
+        if not path.exists():
+            print(f"| {label} | {cohort_seed} | {resolution}³ | {evaluation_seed} | not run "
+                  "| | | | | |")
+            continue
+        r = json.loads(path.read_text())
+        s = r["shapes"]
+        ks = [f["ks"]["p_value"] for f in r["features"] if f["ks"]]
+        print(f"| {label} | {cohort_seed} | {resolution}³ | {evaluation_seed} "
+              f"| {s['nna']['mean']:.3f} | {s['coverage']['cov_subsets']['mean']:.3f} "
+              f"| {s['baseline']['coverage']['cov_subsets']['mean']:.3f} "
+              f"| {s['pairwise']['median_ratio']:.3f} | {s['dcr']['dcr']['median_ratio']:.3f} "
+              f"| {min(ks):.3f} |")
+
+
 if __name__ == "__main__":
-    main(sys.argv[1])
+    if sys.argv[1] == "--noise":
+        noise(sys.argv[2])
+    else:
+        main(sys.argv[1])

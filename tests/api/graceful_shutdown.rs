@@ -32,7 +32,8 @@ fn sigterm_mid_cohort_exits_cleanly_and_the_cohort_resumes() {
             view["status"], "succeeded",
             "the cohort finished before the stop"
         );
-        assert!(start.elapsed() < Duration::from_secs(120), "{view}");
+        // A liveness bound, generous for a 2-core machine shared with other test binaries.
+        assert!(start.elapsed() < Duration::from_secs(300), "{view}");
         std::thread::sleep(Duration::from_millis(20));
     }
     let (status, took, log) = server.terminate(Duration::from_secs(10));
