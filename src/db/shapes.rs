@@ -374,36 +374,11 @@ pub async fn count_all(pool: &super::Pool) -> sqlx::Result<i64> {
 /// A stored shape's measurements and where its mesh is, for measuring it again.
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct MeasuredShape {
-    /// Shape id.
-    pub shape_id: i64,
-    /// Hex SHA-256 of the encoded unit-ball mesh.
-    pub mesh_sha256: String,
-    /// Transform centre x.
-    pub centre_x: f64,
-    /// Transform centre y.
-    pub centre_y: f64,
-    /// Transform centre z.
-    pub centre_z: f64,
-    /// Transform scale.
-    pub radius: f64,
-    /// Anatomical measurements.
+    /// Where its mesh is (and its id).
+    #[sqlx(flatten)]
+    pub mesh: MeshRef,
+    /// Anatomical measurements (none when they failed).
     pub anatomy: Option<Json<ShapeAnatomy>>,
-    /// Why the measurements failed.
-    pub anatomy_error: Option<String>,
-}
-
-impl MeasuredShape {
-    /// Where its mesh is.
-    pub fn mesh_ref(&self) -> MeshRef {
-        MeshRef {
-            shape_id: self.shape_id,
-            mesh_sha256: self.mesh_sha256.clone(),
-            centre_x: self.centre_x,
-            centre_y: self.centre_y,
-            centre_z: self.centre_z,
-            radius: self.radius,
-        }
-    }
 }
 
 /// Up to `limit` shapes with ids above `after`, in id order, with their measurements.
@@ -413,8 +388,7 @@ pub async fn measurements_after(
     limit: i64,
 ) -> sqlx::Result<Vec<MeasuredShape>> {
     sqlx::query_as(
-        "select shape_id, mesh_sha256, centre_x, centre_y, centre_z, radius, anatomy,
-             anatomy_error
+        "select shape_id, mesh_sha256, centre_x, centre_y, centre_z, radius, anatomy
          from shape where shape_id > $1 order by shape_id limit $2",
     )
     .bind(after)

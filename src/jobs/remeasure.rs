@@ -49,18 +49,18 @@ pub async fn remeasure_stored_shapes(
         let Some(last) = rows.last() else {
             break;
         };
-        after = last.shape_id;
+        after = last.mesh.shape_id;
         counts.examined += rows.len() as u64;
         let mut stale = Vec::new();
         for row in rows {
-            match &row.anatomy {
+            let shape_id = row.mesh.shape_id;
+            match row.anatomy {
                 Some(anatomy) if anatomy.0.is_current() => counts.current += 1,
-                _ => match objects.load(row.mesh_ref()).await {
+                _ => match objects.load(row.mesh).await {
                     Ok(stored) => stale.push(stored),
                     Err(e) => {
                         counts.unreadable += 1;
                         let error = format!("{e:#}");
-                        let shape_id = row.shape_id;
                         tracing::warn!(shape_id, error, "mesh unreadable; measurements left");
                     }
                 },
