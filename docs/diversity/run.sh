@@ -9,14 +9,7 @@ out="${2:-/tmp/aortagen-diversity}"
 resolution="${RESOLUTION:-64}"
 count="${COUNT:-100}"
 seed="${SEED:-2026}"
-here="$(cd "$(dirname "$0")" && pwd)"
-cd "$here/../.."
-if [ -n "${AORTAGEN:-}" ]; then
-    bin="$AORTAGEN"
-else
-    cargo build --release --locked --quiet
-    bin="${CARGO_TARGET_DIR:-target}/release/aortagen"
-fi
+source "$(dirname "$0")/../experiment.sh"
 mkdir -p "$out"
 
 cohort() { # NAME GENERATE-FLAGS...

@@ -13,22 +13,10 @@
 # --noise OUT_DIR/noise
 set -euo pipefail
 out="${1:?usage: noise.sh OUT_DIR, the output directory of run.sh}"
-here="$(cd "$(dirname "$0")" && pwd)"
-cd "$here/../.."
-if [ -n "${AORTAGEN:-}" ]; then
-    bin="$AORTAGEN"
-else
-    cargo build --release --locked --quiet
-    bin="${CARGO_TARGET_DIR:-target}/release/aortagen"
-fi
+source "$(dirname "$0")/../experiment.sh"
 model="$out/model-80"
 noise="$out/noise"
 mkdir -p "$noise"
-timed() { # LABEL COMMAND...
-    local label="$1"
-    shift
-    /usr/bin/time -f "$label: %e s, peak RSS %M KiB" "$@"
-}
 criteria='{"nna_max": 0.55, "cov_at_least_baseline": true, "pairwise_median_tolerance": 0.15, "dcr_ratio_min": 1.0, "ks_p_min": 0.05}'
 
 cohort() { # NAME SEED RESOLUTION GENERATE-FLAGS...

@@ -13,21 +13,9 @@ resolution="${RESOLUTION:-64}"
 count="${COUNT:-100}"
 seed="${SEED:-2026}"
 points="${POINTS:-2000}"
-here="$(cd "$(dirname "$0")" && pwd)"
-cd "$here/../.."
-if [ -n "${AORTAGEN:-}" ]; then
-    bin="$AORTAGEN"
-else
-    cargo build --release --locked --quiet
-    bin="${CARGO_TARGET_DIR:-target}/release/aortagen"
-fi
+source "$(dirname "$0")/../experiment.sh"
 mkdir -p "$out"
 model="$out/model-80"
-timed() { # LABEL COMMAND...
-    local label="$1"
-    shift
-    /usr/bin/time -f "$label: %e s, peak RSS %M KiB" "$@"
-}
 
 if [ ! -f "$model/manifest.json" ] || ! grep -q '"complete": true' "$model/manifest.json"; then
     resume=()
