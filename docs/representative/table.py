@@ -3,6 +3,7 @@ the noise table from those noise.sh writes.
 
     python3 docs/representative/table.py OUT_DIR/validation
     python3 docs/representative/table.py --noise OUT_DIR/noise
+    python3 docs/representative/table.py --variants OUT_DIR/variants
 """
 import json
 import sys
@@ -109,28 +110,44 @@ NOISE_ROWS = [
 ]
 
 
+NOISE_HEADER = ("| cohort | cohort seed | mesh | evaluation seed | 1-NNA | COV | real-vs-real COV "
+                "| pairwise median ratio | DCR median ratio | lowest KS p |\n"
+                "|---|---|---|---|---|---|---|---|---|---|")
+
+
+def noise_row(label, cohort_seed, resolution, evaluation_seed, path):
+    if not path.exists():
+        return (f"| {label} | {cohort_seed} | {resolution}³ | {evaluation_seed} | not run "
+                "| | | | | |")
+    r = json.loads(path.read_text())
+    s = r["shapes"]
+    ks = [f["ks"]["p_value"] for f in r["features"] if f["ks"]]
+    return (f"| {label} | {cohort_seed} | {resolution}³ | {evaluation_seed} "
+            f"| {s['nna']['mean']:.3f} | {s['coverage']['cov_subsets']['mean']:.3f} "
+            f"| {s['baseline']['coverage']['cov_subsets']['mean']:.3f} "
+            f"| {s['pairwise']['median_ratio']:.3f} | {s['dcr']['dcr']['median_ratio']:.3f} "
+            f"| {min(ks):.3f} |")
+
+
 def noise(directory):
-    print("| cohort | cohort seed | mesh | evaluation seed | 1-NNA | COV | real-vs-real COV "
-          "| pairwise median ratio | DCR median ratio | lowest KS p |\n"
-          "|---|---|---|---|---|---|---|---|---|---|")
+    print(NOISE_HEADER)
     for label, stem, cohort_seed, resolution, evaluation_seed in NOISE_ROWS:
         path = Path(directory) / f"{stem}.json"
-        if not path.exists():
-            print(f"| {label} | {cohort_seed} | {resolution}³ | {evaluation_seed} | not run "
-                  "| | | | | |")
-            continue
-        r = json.loads(path.read_text())
-        s = r["shapes"]
-        ks = [f["ks"]["p_value"] for f in r["features"] if f["ks"]]
-        print(f"| {label} | {cohort_seed} | {resolution}³ | {evaluation_seed} "
-              f"| {s['nna']['mean']:.3f} | {s['coverage']['cov_subsets']['mean']:.3f} "
-              f"| {s['baseline']['coverage']['cov_subsets']['mean']:.3f} "
-              f"| {s['pairwise']['median_ratio']:.3f} | {s['dcr']['dcr']['median_ratio']:.3f} "
-              f"| {min(ks):.3f} |")
+        print(noise_row(label, cohort_seed, resolution, evaluation_seed, path))
+
+
+def variants(directory):
+    """Every report variants.sh writes (NAME-cSEED-v2026.json), in the noise table's form."""
+    print(NOISE_HEADER)
+    for path in sorted(Path(directory).glob("*-c*-v2026.json")):
+        name, cohort_seed = path.stem.removesuffix("-v2026").rsplit("-c", 1)
+        print(noise_row(name, cohort_seed, 64, 2026, path))
 
 
 if __name__ == "__main__":
     if sys.argv[1] == "--noise":
         noise(sys.argv[2])
+    elif sys.argv[1] == "--variants":
+        variants(sys.argv[2])
     else:
         main(sys.argv[1])

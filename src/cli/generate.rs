@@ -15,8 +15,8 @@ use crate::cohort::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, parse_target_a
 use crate::cohort::weights::parse_weights;
 use crate::cohort::{
     CohortFields, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape,
-    DEFAULT_RESOLUTION, EngineHandle, ModelLatents, RequestError, RequestLimits, SamplerFields,
-    SamplerKind, Selection, ShapeRecord, Weighting,
+    CovarianceEstimate, DEFAULT_RESOLUTION, EngineHandle, ModelLatents, RequestError,
+    RequestLimits, SamplerFields, SamplerKind, Selection, ShapeRecord, Weighting,
 };
 use crate::engine::{AnchorLatent, Engine, SdfEngine};
 use crate::formats::{MeshFormat, MeshMetadata, write_mesh};
@@ -141,6 +141,14 @@ pub struct SamplerArgs {
     /// pca-gaussian: scale on every mode's standard deviation (default 1).
     #[arg(long)]
     pub sigma_scale: Option<f64>,
+    /// pca-gaussian: how the covariance is estimated: `sample` (default) or `ledoit-wolf`
+    /// (shrunk towards a multiple of the identity by the estimated intensity).
+    #[arg(long, value_enum)]
+    pub covariance: Option<CovarianceEstimate>,
+    /// pca-gaussian: shrink the sample covariance towards a multiple of the identity by
+    /// this intensity in [0, 1], keeping the total variance.
+    #[arg(long, value_name = "RHO")]
+    pub shrinkage: Option<f64>,
     /// Density samplers: keep the fewest modes explaining this share of the variance (0–1].
     #[arg(long)]
     pub variance_share: Option<f64>,
@@ -162,6 +170,8 @@ impl SamplerArgs {
             kind: self.kind,
             truncation: self.truncation,
             sigma_scale: self.sigma_scale,
+            covariance: self.covariance,
+            shrinkage: self.shrinkage,
             variance_share: self.variance_share,
             components: self.components,
             max_components: self.max_components,
@@ -250,11 +260,12 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     if let Some(sampler) = &plan.sampler {
         let s = sampler.summary();
         println!(
-            "sampler {}: {} modes ({:.1} % of the variance), {} component(s)",
+            "sampler {}: {} modes ({:.1} % of the variance), {} component(s), shrinkage {:.3}",
             args.sampler.kind.name(),
             s.modes,
             100.0 * s.explained_share,
-            s.components
+            s.components,
+            s.shrinkage
         );
     }
     let handle = EngineHandle {

@@ -222,6 +222,7 @@ pub fn property_rules() -> Vec<(&'static str, &'static str, Rule)> {
         ),
         ("SamplerFields", "truncation", Rule::positive(None)),
         ("SamplerFields", "sigma_scale", Rule::positive(None)),
+        ("SamplerFields", "shrinkage", Rule::within(0.0, 1.0)),
         ("SamplerFields", "variance_share", Rule::positive(Some(1.0))),
         (
             "SamplerFields",

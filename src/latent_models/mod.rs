@@ -5,8 +5,10 @@
 //! every model here first reduces to the latents' principal components ([`pca`], via the
 //! n × n Gram matrix), where at most n − 1 directions carry variance:
 //! * [`gaussian::PcaGaussian`]: independent normal scores per mode, optionally truncated
-//!   at ±c σ per mode (the statistical-shape-model practice for virtual TAVI cohorts) and
-//!   scaled;
+//!   at ±c σ per mode (the statistical-shape-model practice for virtual TAVI cohorts),
+//!   scaled, and with its covariance shrunk towards a multiple of the identity
+//!   ([`shrinkage`]: a sample covariance of n ≈ d latents is too narrow in its trailing
+//!   modes);
 //! * [`mixture::PcaMixture`]: a Gaussian mixture on the leading whitened modes (EM from a
 //!   k-means++ start, regularised covariances, number of components given or chosen by
 //!   BIC) with the remaining modes independent normal, for populations with sub-groups.
@@ -19,6 +21,7 @@ pub mod em;
 pub mod gaussian;
 pub mod mixture;
 pub mod pca;
+pub mod shrinkage;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

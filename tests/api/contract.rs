@@ -361,7 +361,9 @@ fn cohort_probe(path: &[Step], value: &Value) -> Value {
         ["sampler", field] => {
             let kind = match *field {
                 "kind" => value.clone(),
-                "truncation" | "sigma_scale" | "variance_share" => json!("pca_gaussian"),
+                "truncation" | "sigma_scale" | "variance_share" | "covariance" | "shrinkage" => {
+                    json!("pca_gaussian")
+                }
                 "components" | "max_components" | "mixture_modes" => json!("pca_mixture"),
                 other => panic!("no sampler kind known for sampler.{other}"),
             };
@@ -437,6 +439,8 @@ async fn every_bounded_cohort_field_is_accepted_inside_and_refused_outside() {
         "sampler.kind",
         "sampler.truncation",
         "sampler.sigma_scale",
+        "sampler.covariance",
+        "sampler.shrinkage",
         "sampler.variance_share",
         "sampler.components",
         "sampler.max_components",

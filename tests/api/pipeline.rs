@@ -8,7 +8,9 @@ use std::path::Path;
 
 use aortagen::cli::generate::{GenerateArgs, SamplerArgs, Units, run};
 use aortagen::cohort::targets::TargetRange;
-use aortagen::cohort::{SamplerKind, Selection, ShapeProvenance, ShapeRecord, Weighting};
+use aortagen::cohort::{
+    CovarianceEstimate, SamplerKind, Selection, ShapeProvenance, ShapeRecord, Weighting,
+};
 use aortagen::formats::{MeshFormat, read_mesh_bytes};
 use aortagen::geometry::TriMesh;
 use aortagen::geometry::normalize::UnitBallTransform;
@@ -227,11 +229,13 @@ async fn the_command_line_and_the_service_generate_the_same_cohort() {
     assert_eq!(details[0]["redraws"], 10);
     assert_eq!(details[0]["novelty_met"], false);
 
-    // A truncated PCA Gaussian, with forced redraws and with targets: every draw is the
-    // sampler's, the provenance names it with its defaults, and both ways agree.
+    // A truncated PCA Gaussian with a Ledoit–Wolf covariance (drawing also outside the
+    // span of the training latents), with forced redraws and with targets: every draw is
+    // the sampler's, the provenance names it with its defaults, and both ways agree.
     let gaussian = SamplerArgs {
         kind: SamplerKind::PcaGaussian,
         truncation: Some(2.0),
+        covariance: Some(CovarianceEstimate::LedoitWolf),
         ..SamplerArgs::default()
     };
     let sampled = Request {
@@ -250,6 +254,7 @@ async fn the_command_line_and_the_service_generate_the_same_cohort() {
             ),
             (Some(2.0), Some(1.0))
         );
+        assert_eq!(p["sampler"]["covariance"], "ledoit_wolf");
         assert_eq!(p["training_indices"], json!([]));
         assert_eq!(p["weights"], json!([1.0]));
         assert_eq!(d["redraws"], 10);

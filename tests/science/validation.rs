@@ -211,6 +211,50 @@ fn copies_of_the_training_shapes_sit_at_the_sampling_floor_and_are_flagged() {
 }
 
 #[test]
+fn a_cov_margin_accepts_a_cohort_that_far_below_the_baseline_and_no_further() {
+    let cohort = population("cohort", 51, 16, 0.0);
+    let reference = population("reference", 52, 8, 0.0);
+    let training = population("training", 53, 16, 0.0);
+    let report = run(
+        &cohort,
+        &reference,
+        Some(&training),
+        AcceptanceCriteria::default(),
+    );
+    let mut level = report.shapes.unwrap();
+    // Pin the figures so that the cohort sits 0.04 below the baseline.
+    level.baseline.as_mut().unwrap().coverage.cov_subsets.mean = 0.55;
+    level.coverage.as_mut().unwrap().cov_subsets.mean = 0.51;
+    let cov_check = |criteria: AcceptanceCriteria| {
+        let criteria = criteria.check().unwrap();
+        let checks = aortagen::validation::criteria::evaluate(&criteria, Ok(&level), &[]);
+        let cov: Vec<_> = checks
+            .into_iter()
+            .filter(|c| c.criterion == "cov_at_least_baseline")
+            .collect();
+        assert_eq!(cov.len(), 1, "{cov:?}");
+        (cov[0].passed, cov[0].requirement.clone())
+    };
+    let strict = AcceptanceCriteria {
+        cov_at_least_baseline: Some(true),
+        ..Default::default()
+    };
+    assert_eq!(cov_check(strict.clone()).0, Some(false));
+    let wide = cov_check(AcceptanceCriteria {
+        cov_baseline_margin: Some(0.05),
+        ..strict.clone()
+    });
+    assert_eq!(wide.0, Some(true));
+    assert!(wide.1.contains("0.550 − 0.05"), "{}", wide.1);
+    // The margin alone asks for the check.
+    let narrow = cov_check(AcceptanceCriteria {
+        cov_baseline_margin: Some(0.03),
+        ..Default::default()
+    });
+    assert_eq!(narrow.0, Some(false));
+}
+
+#[test]
 fn a_raised_stop_flag_skips_the_chamfer_distances_and_says_so() {
     let cohort = population("cohort", 41, 6, 0.0);
     let reference = population("reference", 42, 6, 0.0);

@@ -42,6 +42,8 @@ pub struct SamplerSummary {
     pub explained_share: f64,
     /// Mixture components (1 for the Gaussian).
     pub components: usize,
+    /// Covariance shrinkage intensity ρ (0: the sample covariance).
+    pub shrinkage: f64,
 }
 
 impl JointSampler {
@@ -100,14 +102,15 @@ impl JointSampler {
 
     /// Modes, explained variance and components of the fitted model.
     pub fn summary(&self) -> SamplerSummary {
-        let (pca, components) = match &self.sampler {
-            LatentSampler::PcaGaussian(g) => (&g.pca, 1),
-            LatentSampler::PcaMixture(m) => (&m.pca, m.components.len()),
+        let (pca, components, shrinkage) = match &self.sampler {
+            LatentSampler::PcaGaussian(g) => (&g.pca, 1, g.shrinkage),
+            LatentSampler::PcaMixture(m) => (&m.pca, m.components.len(), 0.0),
         };
         SamplerSummary {
             modes: pca.modes(),
             explained_share: pca.explained_share(),
             components,
+            shrinkage,
         }
     }
 }

@@ -27,6 +27,7 @@ use crate::latent_models::SamplerConfig;
 use crate::latent_models::gaussian::PcaGaussianConfig;
 use crate::latent_models::mixture::{ComponentCount, PcaMixtureConfig};
 use crate::latent_models::pca::ModeSelection;
+use crate::latent_models::shrinkage::Shrinkage;
 
 /// Largest number of mixture components a request may ask for.
 pub const MAX_COMPONENTS: i64 = 16;
@@ -63,6 +64,30 @@ pub enum SamplerKind {
     PcaMixture,
 }
 
+/// How the Gaussian's covariance is estimated from the training latents.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    utoipa::ToSchema,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum CovarianceEstimate {
+    /// The sample covariance, shrunk by `shrinkage` if given.
+    #[default]
+    Sample,
+    /// Ledoit–Wolf: shrunk towards a multiple of the identity by the intensity the
+    /// latents themselves suggest (with about as many latents as dimensions the sample
+    /// covariance is too narrow in its trailing modes).
+    LedoitWolf,
+}
+
 /// A cohort request's `sampler` as it arrives.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -76,6 +101,13 @@ pub struct SamplerFields {
     /// `pca_gaussian`: multiplies every mode's standard deviation (> 0, default 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sigma_scale: Option<f64>,
+    /// `pca_gaussian`: how the covariance is estimated (default `sample`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covariance: Option<CovarianceEstimate>,
+    /// `pca_gaussian` with the `sample` covariance: pull it towards a multiple of the
+    /// identity by this intensity, in [0, 1] (default 0), keeping the total variance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shrinkage: Option<f64>,
     /// Density samplers: keep the fewest leading modes that explain this share of the
     /// latents' variance, in (0, 1] (default 1: every mode with variance).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -129,6 +161,16 @@ impl SamplerChoice {
             f.sigma_scale.is_some() && !gaussian,
             "pca_gaussian",
         )?;
+        only(
+            "covariance",
+            f.covariance.is_some() && !gaussian,
+            "pca_gaussian",
+        )?;
+        only(
+            "shrinkage",
+            f.shrinkage.is_some() && !gaussian,
+            "pca_gaussian",
+        )?;
         let density = "pca_gaussian or pca_mixture";
         only(
             "variance_share",
@@ -158,6 +200,7 @@ impl SamplerChoice {
                     modes,
                     truncation: positive("truncation", f.truncation)?,
                     sigma_scale: positive("sigma_scale", f.sigma_scale)?.unwrap_or(1.0),
+                    shrinkage: shrinkage(f)?,
                 }))
             }
             SamplerKind::PcaMixture => {
@@ -185,6 +228,14 @@ impl SamplerChoice {
                 kind: SamplerKind::PcaGaussian,
                 truncation: g.truncation,
                 sigma_scale: Some(g.sigma_scale),
+                covariance: Some(match g.shrinkage {
+                    Some(Shrinkage::LedoitWolf) => CovarianceEstimate::LedoitWolf,
+                    _ => CovarianceEstimate::Sample,
+                }),
+                shrinkage: match g.shrinkage {
+                    Some(Shrinkage::Intensity(rho)) => Some(rho),
+                    _ => None,
+                },
                 variance_share: share(&g.modes),
                 ..SamplerFields::default()
             },
@@ -259,6 +310,28 @@ fn mixture_config(
     })
 }
 
+/// The Gaussian's shrinkage: Ledoit–Wolf, a fixed intensity in [0, 1], or none.
+fn shrinkage(f: &SamplerFields) -> Result<Option<Shrinkage>, RequestError> {
+    match (f.covariance.unwrap_or_default(), f.shrinkage) {
+        (CovarianceEstimate::LedoitWolf, Some(_)) => Err(RequestError::new(
+            "sampler.shrinkage",
+            "exclusive",
+            "the ledoit_wolf covariance estimates its own shrinkage; give shrinkage only with \
+             the sample covariance",
+        )),
+        (CovarianceEstimate::LedoitWolf, None) => Ok(Some(Shrinkage::LedoitWolf)),
+        (CovarianceEstimate::Sample, None) => Ok(None),
+        (CovarianceEstimate::Sample, Some(rho)) if (0.0..=1.0).contains(&rho) => {
+            Ok(Some(Shrinkage::Intensity(rho)))
+        }
+        (CovarianceEstimate::Sample, Some(rho)) => Err(RequestError::new(
+            "sampler.shrinkage",
+            "range",
+            format!("must be in [0, 1], got {rho}"),
+        )),
+    }
+}
+
 fn mode_selection(share: Option<f64>) -> Result<ModeSelection, RequestError> {
     match share {
         // A share of 1 keeps exactly the modes with variance.
@@ -318,8 +391,22 @@ mod tests {
             ComponentCount::Bic(DEFAULT_MAX_COMPONENTS)
         );
         assert_eq!(m.recorded().unwrap().max_components, Some(4));
+        let shrunk = |covariance, shrinkage| {
+            SamplerChoice::parse(Some(&SamplerFields {
+                covariance,
+                shrinkage,
+                ..fields(SamplerKind::PcaGaussian)
+            }))
+            .unwrap()
+        };
+        let lw = shrunk(Some(CovarianceEstimate::LedoitWolf), None);
+        let fixed = shrunk(None, Some(0.3));
+        let SamplerChoice::Density(SamplerConfig::PcaGaussian(config)) = &fixed else {
+            panic!("{fixed:?}");
+        };
+        assert_eq!(config.shrinkage, Some(Shrinkage::Intensity(0.3)));
         // The recorded form parses back to the same sampler.
-        for choice in [g, m] {
+        for choice in [g, m, lw, fixed] {
             let again = SamplerChoice::parse(choice.recorded().as_ref()).unwrap();
             assert_eq!(again, choice);
         }
@@ -367,6 +454,31 @@ mod tests {
                 },
                 "sampler.sigma_scale",
                 "positive",
+            ),
+            (
+                SamplerFields {
+                    shrinkage: Some(0.2),
+                    ..fields(SamplerKind::PcaMixture)
+                },
+                "sampler.shrinkage",
+                "sampler-parameter",
+            ),
+            (
+                SamplerFields {
+                    shrinkage: Some(1.01),
+                    ..fields(SamplerKind::PcaGaussian)
+                },
+                "sampler.shrinkage",
+                "range",
+            ),
+            (
+                SamplerFields {
+                    shrinkage: Some(0.2),
+                    covariance: Some(CovarianceEstimate::LedoitWolf),
+                    ..fields(SamplerKind::PcaGaussian)
+                },
+                "sampler.shrinkage",
+                "exclusive",
             ),
             (
                 SamplerFields {

@@ -76,7 +76,8 @@ pub struct CreateCohort {
     /// How latents are drawn (default: `{"kind": "convex"}`, combinations of `arity`
     /// training latents). `pca_gaussian` draws from a Gaussian in the training latents'
     /// principal components (`truncation` c: each mode within ±c σ; `sigma_scale`;
-    /// `variance_share`), `pca_mixture` from a Gaussian mixture on the leading whitened
+    /// `covariance: ledoit_wolf` or a fixed `shrinkage` pulls the covariance towards a
+    /// multiple of the identity; `variance_share`), `pca_mixture` from a Gaussian mixture on the leading whitened
     /// components (`components`, or `max_components` chosen by BIC; `mixture_modes`;
     /// `variance_share`). Both model the unit-ball transform (size and position in mm)
     /// jointly with the latent. `selection: spread` and `latent_noise` apply to the convex
