@@ -55,6 +55,8 @@ pub fn training_latents() -> Vec<Vec<f32>> {
 pub struct AnalyticEngine {
     /// `generate_shape` calls so far.
     pub calls: AtomicUsize,
+    /// `generate_shape` calls that have returned a shape.
+    pub returned: AtomicUsize,
     /// Calls numbered ≥ this (0-based) wait until `release` or the cancel flag is set.
     pub hold_from_call: Option<usize>,
     /// Lets held calls continue.
@@ -134,6 +136,7 @@ impl Engine for AnalyticEngine {
         let mesh = ellipsoid_unit(axes, radius);
         let area_mm2 = mesh.area() * radius.powi(2);
         let volume_mm3 = mesh.signed_volume() * radius.powi(3);
+        self.returned.fetch_add(1, Ordering::SeqCst);
         Ok(GeneratedShape {
             mesh_unit: mesh,
             transform: UnitBallTransform {

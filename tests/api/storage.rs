@@ -115,10 +115,23 @@ async fn a_job_hitting_a_storage_fault_goes_back_to_the_queue_and_finishes_later
     });
     wait_for_calls(&app, 2).await;
 
-    // Shape 0 is stored; shape 1 is being generated when storage turns read-only.
+    // Shape 0 is stored; shape 1 is being generated when storage turns read-only. Storage
+    // stays read-only until shape 1 has left the engine and had ample time to reach its
+    // write, however slowly the machine runs.
     app.state.read_only_switch.set(true);
     app.engine.release.store(true, Ordering::SeqCst);
-    tokio::time::sleep(Duration::from_millis(600)).await;
+    for _ in 0..15_000 {
+        if app.engine.returned.load(Ordering::SeqCst) >= 2 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    assert_eq!(
+        app.engine.returned.load(Ordering::SeqCst),
+        2,
+        "shape 1 was never generated"
+    );
+    tokio::time::sleep(Duration::from_millis(2_000)).await;
     assert!(!run.is_finished(), "the worker waits for storage");
     let during = app.get(&format!("/v1/cohorts/{id}")).await.json();
     assert_eq!(during["status"], "running", "not failed: {during}");
