@@ -19,6 +19,15 @@ dir="$out/variants"
 mkdir -p "$dir"
 criteria='{"nna_max": 0.55, "cov_at_least_baseline": true, "pairwise_median_tolerance": 0.15, "dcr_ratio_min": 1.0, "ks_p_min": 0.05}'
 
+validate() { # REPORT-NAME COHORT-DIR REFERENCE POINTS: writes $dir/REPORT-NAME.{json,html,log}
+    local report="$dir/$1"
+    [ -f "$report.json" ] && return
+    echo "== validate $1"
+    timed "validate $1" "$bin" validate --cohort "$2" --reference "$3" \
+        --model "$model" --criteria "$criteria" --points "$4" --seed 2026 \
+        --json "$report.json" --out "$report.html" > "$report.log" 2>&1
+}
+
 run() { # NAME SEED GENERATE-FLAGS...: report NAME-cSEED-v2026
     local name="$1-c$2" seed="$2"
     shift 2
@@ -28,12 +37,7 @@ run() { # NAME SEED GENERATE-FLAGS...: report NAME-cSEED-v2026
             --resolution 64 --novelty-points 10000 --format ply \
             --out "$dir/$name" "$@" > "$dir/$name.log" 2>&1
     fi
-    local report="$dir/$name-v2026"
-    [ -f "$report.json" ] && return
-    echo "== validate $name"
-    timed "validate $name" "$bin" validate --cohort "$dir/$name" --reference heldout \
-        --model "$model" --criteria "$criteria" --points 10000 --seed 2026 \
-        --json "$report.json" --out "$report.html" > "$report.log" 2>&1
+    validate "$name-v2026" "$dir/$name" heldout 10000
 }
 
 gmm=(--sampler pca-mixture --components 2)
@@ -52,16 +56,12 @@ done
 
 # The same cohorts against the 80 training shapes at run.sh's 2 000 points, beside gmm-k2's
 # (run.sh's validation/gmm-k2-training.json is cohort seed 2026).
-training() { # NAME COHORT-DIR
-    local report="$dir/$1-training"
-    [ -f "$report.json" ] && return
-    echo "== validate $1 against the training shapes"
-    timed "validate $1 training" "$bin" validate --cohort "$2" --reference training \
-        --model "$model" --criteria "$criteria" --points 2000 --seed 2026 \
-        --json "$report.json" --out "$report.html" > "$report.log" 2>&1
-}
-for seed in 2026 2027 2028; do training "pca-lw-s1.09-c$seed" "$dir/pca-lw-s1.09-c$seed"; done
-for seed in 2027 2028; do training "gmm-k2-c$seed" "$out/noise/gmm-k2-c$seed"; done
+for seed in 2026 2027 2028; do
+    validate "pca-lw-s1.09-c$seed-training" "$dir/pca-lw-s1.09-c$seed" training 2000
+done
+for seed in 2027 2028; do
+    validate "gmm-k2-c$seed-training" "$out/noise/gmm-k2-c$seed" training 2000
+done
 
 # The held-out shapes as the decoder renders them: each fitted with the network frozen
 # (`aortagen fit`, on a copy of the model so the anchors stay out of it) and meshed at 64³
@@ -86,10 +86,4 @@ if [ ! -d "$rendered" ]; then
     done
     mv "$rendered.part" "$rendered"
 fi
-report="$dir/heldout-reconstructions-v2026"
-if [ ! -f "$report.json" ]; then
-    echo "== validate the held-out reconstructions"
-    timed "validate heldout-reconstructions" "$bin" validate --cohort "$rendered" \
-        --reference heldout --model "$model" --criteria "$criteria" --points 10000 --seed 2026 \
-        --json "$report.json" --out "$report.html" > "$report.log" 2>&1
-fi
+validate heldout-reconstructions-v2026 "$rendered" heldout 10000

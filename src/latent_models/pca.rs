@@ -48,13 +48,7 @@ impl Pca {
         check_selection(modes)?;
         let d = check_latents("principal components", latents, 2)?;
         let n = latents.len();
-        let mean: Vec<f64> = (0..d)
-            .map(|j| latents.iter().map(|z| z[j]).sum::<f64>() / n as f64)
-            .collect();
-        let centred: Vec<Vec<f64>> = latents
-            .iter()
-            .map(|z| z.iter().zip(&mean).map(|(a, m)| a - m).collect())
-            .collect();
+        let (mean, centred) = centre(latents);
         let (values, directions) = if n <= d {
             gram_modes(&centred)
         } else {
@@ -148,7 +142,21 @@ fn scatter_modes(centred: &[Vec<f64>]) -> (Vec<f64>, Vec<Vec<f64>>) {
     symmetric_eigen(&scatter)
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+/// The mean of `latents` (≥ 1, all of one length) and every latent minus it.
+pub(crate) fn centre(latents: &[Vec<f64>]) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let n = latents.len();
+    let d = latents.first().map_or(0, Vec::len);
+    let mean: Vec<f64> = (0..d)
+        .map(|j| latents.iter().map(|z| z[j]).sum::<f64>() / n as f64)
+        .collect();
+    let centred = latents
+        .iter()
+        .map(|z| z.iter().zip(&mean).map(|(a, m)| a - m).collect())
+        .collect();
+    (mean, centred)
+}
+
+pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
@@ -217,13 +225,7 @@ mod tests {
     #[test]
     fn the_gram_and_scatter_routes_give_the_same_modes() {
         let latents = anisotropic(12, 6, 5, |j| 1.0 + j as f64);
-        let mean: Vec<f64> = (0..6)
-            .map(|j| latents.iter().map(|z| z[j]).sum::<f64>() / 12.0)
-            .collect();
-        let centred: Vec<Vec<f64>> = latents
-            .iter()
-            .map(|z| z.iter().zip(&mean).map(|(a, m)| a - m).collect())
-            .collect();
+        let (_, centred) = centre(&latents);
         let (gv, gu) = gram_modes(&centred);
         let (sv, su) = scatter_modes(&centred);
         for k in 0..6 {

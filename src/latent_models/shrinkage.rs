@@ -15,6 +15,7 @@
 //! covariance matrices", Lemmas 3.2–3.4) from the data alone, computed from the n × n
 //! Gram matrix of the centred latents so that a large p costs nothing extra.
 
+use super::pca::{centre, dot};
 use super::{LatentModelError, check_latents};
 
 /// How far the sampler's covariance is pulled towards a multiple of the identity.
@@ -50,14 +51,7 @@ impl Shrinkage {
 pub fn ledoit_wolf(latents: &[Vec<f64>]) -> Result<f64, LatentModelError> {
     let p = check_latents("Ledoit-Wolf shrinkage", latents, 2)?;
     let n = latents.len() as f64;
-    let mean: Vec<f64> = (0..p)
-        .map(|j| latents.iter().map(|z| z[j]).sum::<f64>() / n)
-        .collect();
-    let centred: Vec<Vec<f64>> = latents
-        .iter()
-        .map(|z| z.iter().zip(&mean).map(|(a, m)| a - m).collect())
-        .collect();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let (_, centred) = centre(latents);
     let (mut diagonal_sq, mut all_sq, mut trace_n) = (0.0, 0.0, 0.0);
     for (k, a) in centred.iter().enumerate() {
         for (l, b) in centred.iter().enumerate() {
@@ -92,13 +86,7 @@ mod tests {
     /// The definition, term by term on p × p matrices.
     fn ledoit_wolf_by_definition(latents: &[Vec<f64>]) -> f64 {
         let (n, p) = (latents.len(), latents[0].len());
-        let mean: Vec<f64> = (0..p)
-            .map(|j| latents.iter().map(|z| z[j]).sum::<f64>() / n as f64)
-            .collect();
-        let x: Vec<Vec<f64>> = latents
-            .iter()
-            .map(|z| z.iter().zip(&mean).map(|(a, m)| a - m).collect())
-            .collect();
+        let (_, x) = centre(latents);
         let s: Vec<Vec<f64>> = (0..p)
             .map(|i| {
                 (0..p)
