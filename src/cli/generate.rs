@@ -15,7 +15,7 @@ use crate::cohort::targets::{DEFAULT_MAX_CANDIDATES, TargetRange, parse_target_a
 use crate::cohort::weights::parse_weights;
 use crate::cohort::{
     CohortFields, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape,
-    CovarianceEstimate, DEFAULT_RESOLUTION, EngineHandle, ModelLatents, RequestError,
+    CovarianceEstimate, DEFAULT_RESOLUTION, EngineHandle, LatentSource, ModelLatents, RequestError,
     RequestLimits, SamplerFields, SamplerKind, Selection, ShapeRecord, Weighting,
 };
 use crate::engine::{AnchorLatent, Engine, SdfEngine};
@@ -161,6 +161,10 @@ pub struct SamplerArgs {
     /// pca-mixture: leading principal modes the mixture models (default 4).
     #[arg(long)]
     pub mixture_modes: Option<i64>,
+    /// Density samplers: fit the density to the `training` latents (default) or to the
+    /// training shapes `refitted` with the network frozen (`aortagen refit` first).
+    #[arg(long, value_enum, value_name = "SOURCE")]
+    pub latents: Option<LatentSource>,
 }
 
 impl SamplerArgs {
@@ -176,6 +180,7 @@ impl SamplerArgs {
             components: self.components,
             max_components: self.max_components,
             mixture_modes: self.mixture_modes,
+            latents: self.latents,
         };
         (fields != SamplerFields::default()).then_some(fields)
     }
@@ -242,7 +247,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     );
     let info = engine.model_info(&args.model)?;
     let count = info.training_shape_count();
-    request.check_model(count).map_err(flag_error)?;
+    request.check_model(&info).map_err(flag_error)?;
     let manifest = read_manifest(&args.model)?;
     let anchors = anchor_latents(&args.model, &request)?;
     std::fs::create_dir_all(&args.out)

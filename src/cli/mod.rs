@@ -10,6 +10,7 @@ pub mod measure;
 pub mod mesh;
 pub mod migrate;
 pub mod progress;
+pub mod refit;
 pub mod render;
 pub mod report;
 pub mod serve;
@@ -41,6 +42,9 @@ pub enum Command {
     Evaluate(evaluate::EvaluateArgs),
     /// Fit a latent to a new mesh (network frozen) and keep it as an anchor of the model.
     Fit(fit::FitArgs),
+    /// Fit every training shape again with the network frozen, as a new patient is fitted,
+    /// for density samplers that draw like new patients (`generate --latents refitted`).
+    Refit(refit::RefitArgs),
     /// Generate shapes as convex combinations of learned latents.
     Generate(generate::GenerateArgs),
     /// Report a mesh file's counts, area, volume, closedness and extent; convert formats.
@@ -71,6 +75,7 @@ pub fn run() -> anyhow::Result<()> {
         Command::Train(args) => train::run(args),
         Command::Evaluate(args) => evaluate::run(args),
         Command::Fit(args) => fit::run(args),
+        Command::Refit(args) => refit::run(args),
         Command::Generate(args) => generate::run(args),
         Command::Mesh(args) => mesh::run(args),
         Command::Serve(args) => serve::run(args),

@@ -26,7 +26,7 @@ pub use generator::{CohortGenerator, CohortSetup, EngineHandle};
 pub use plan::{CohortPlan, ModelLatents};
 pub use record::{AnchorShare, CohortShape, ShapeProvenance, ShapeRecord};
 pub use request::{CohortFields, CohortRequest, RequestError, RequestLimits, TargetSearch};
-pub use sampler::{CovarianceEstimate, SamplerChoice, SamplerFields, SamplerKind};
+pub use sampler::{CovarianceEstimate, LatentSource, SamplerChoice, SamplerFields, SamplerKind};
 pub use selection::Selection;
 pub use targets::Targets;
 pub use targets::feasibility::Infeasible;

@@ -12,8 +12,8 @@ use rand_chacha::ChaCha8Rng;
 
 use super::CohortError;
 use super::request::CohortRequest;
-use super::sampler::SamplerChoice;
 use super::sampler::joint::JointSampler;
+use super::sampler::{LatentSource, SamplerChoice};
 use super::seeds::{attempt_seed, shape_seed};
 use super::selection::{Selection, choose_distinct, select_spread};
 use super::weights::WeightChoice;
@@ -21,7 +21,8 @@ use crate::engine::{AnchorLatent, Engine, ShapeSpec};
 use crate::geometry::normalize::UnitBallTransform;
 
 /// The model's training latents (and, for density samplers, their transforms), which
-/// spread selection picks from and density samplers are fitted to.
+/// spread selection picks from and density samplers are fitted to: the latents from
+/// training, or the training shapes' re-fitted latents when the sampler asks for them.
 #[derive(Debug, Clone)]
 pub struct ModelLatents {
     /// Latents in training-index order.
@@ -42,6 +43,24 @@ impl ModelLatents {
         let density = !request.sampler.is_convex();
         if !(density || request.selection.needs_latents()) {
             return Ok(None);
+        }
+        if request.sampler.latent_source() == Some(LatentSource::Refitted) {
+            let (latents, transforms) = engine
+                .refitted_latents(model_dir)
+                .context("cannot read the re-fitted latents")?
+                .context(
+                    "the model has no re-fitted latents for every training shape \
+                     (`aortagen refit` adds them)",
+                )?;
+            anyhow::ensure!(
+                latents.len() == count && transforms.len() == count,
+                "the engine returned {} re-fitted latents for {count} training shapes",
+                latents.len()
+            );
+            return Ok(Some(Self {
+                latents: Arc::new(latents),
+                transforms,
+            }));
         }
         let latents = engine
             .training_latents(model_dir)
@@ -104,11 +123,11 @@ impl CohortPlan {
     ) -> Result<Self, CohortError> {
         let sampler = match (&request.sampler, model) {
             (SamplerChoice::Convex, _) => None,
-            (SamplerChoice::Density(config), Some(m)) => Some(Arc::new(
+            (SamplerChoice::Density(config, _), Some(m)) => Some(Arc::new(
                 JointSampler::fit(config, &m.latents, &m.transforms)
                     .map_err(CohortError::Sampler)?,
             )),
-            (SamplerChoice::Density(_), None) => {
+            (SamplerChoice::Density(..), None) => {
                 return Err(CohortError::Reference(anyhow::anyhow!(
                     "a density sampler needs the training latents"
                 )));

@@ -6,10 +6,11 @@
 use std::collections::BTreeMap;
 use std::fmt::Display;
 
-use super::sampler::{SamplerChoice, SamplerFields};
+use super::sampler::{LatentSource, SamplerChoice, SamplerFields};
 use super::targets::{DEFAULT_MAX_CANDIDATES, MAX_CANDIDATES, TargetError, TargetRange, Targets};
 use super::weights::{WeightChoice, WeightError, Weighting};
 use super::{DEFAULT_RESOLUTION, RESOLUTION_RANGE, Selection};
+use crate::engine::ModelInfo;
 
 /// Fewest shapes a cohort may have.
 pub const MIN_COUNT: i64 = 1;
@@ -186,10 +187,20 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
         })
     }
 
-    /// The rules against the model: the arity within its training shapes, and a density
-    /// sampler's component count below them.
-    pub fn check_model(&self, training_shapes: usize) -> Result<(), RequestError> {
-        if let SamplerChoice::Density(crate::latent_models::SamplerConfig::PcaMixture(m)) =
+    /// The rules against the model: the arity within its training shapes, a density
+    /// sampler's component count below them, and re-fitted latents only from a model that
+    /// has them.
+    pub fn check_model(&self, model: &ModelInfo) -> Result<(), RequestError> {
+        let training_shapes = model.training_shape_count();
+        if self.sampler.latent_source() == Some(LatentSource::Refitted) && !model.refitted_latents {
+            return Err(RequestError::new(
+                "sampler.latents",
+                "unavailable",
+                "the model's training shapes were not re-fitted (`aortagen refit` fits them \
+                 with the network frozen); use \"training\"",
+            ));
+        }
+        if let SamplerChoice::Density(crate::latent_models::SamplerConfig::PcaMixture(m), _) =
             &self.sampler
             && let crate::latent_models::mixture::ComponentCount::Fixed(k) = m.components
             && k > training_shapes
@@ -715,8 +726,46 @@ mod tests {
             ..fields()
         })
         .unwrap();
-        assert!(r.check_model(5).is_ok());
-        let err = r.check_model(4).unwrap_err();
+        assert!(r.check_model(&model(5, false)).is_ok());
+        let err = r.check_model(&model(4, false)).unwrap_err();
         assert_eq!((err.field.as_str(), err.rule), ("arity", "range"));
+    }
+
+    fn model(shapes: usize, refitted_latents: bool) -> ModelInfo {
+        ModelInfo {
+            latent_dim: 2,
+            architecture: serde_json::Value::Null,
+            training_shapes: (0..shapes)
+                .map(|index| crate::engine::TrainingShapeInfo {
+                    index,
+                    name: format!("s{index}"),
+                    reconstruction_cd: None,
+                })
+                .collect(),
+            refitted_latents,
+        }
+    }
+
+    #[test]
+    fn refitted_latents_are_asked_only_of_a_model_that_has_them() {
+        let r = parse(CohortFields {
+            arity: None,
+            resolution: Some(64),
+            sampler: Some(SamplerFields {
+                latents: Some(LatentSource::Refitted),
+                ..SamplerFields {
+                    kind: crate::cohort::SamplerKind::PcaGaussian,
+                    ..SamplerFields::default()
+                }
+            }),
+            ..fields()
+        })
+        .unwrap();
+        let err = r.check_model(&model(5, false)).unwrap_err();
+        assert_eq!(
+            (err.field.as_str(), err.rule),
+            ("sampler.latents", "unavailable")
+        );
+        assert!(r.check_model(&model(5, true)).is_ok());
     }
 }

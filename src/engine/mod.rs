@@ -27,6 +27,10 @@ pub struct ModelInfo {
     pub architecture: serde_json::Value,
     /// The training shapes, in latent order.
     pub training_shapes: Vec<TrainingShapeInfo>,
+    /// Whether every training shape was re-fitted with the network frozen (density
+    /// samplers may then draw from the re-fitted latents).
+    #[serde(default)]
+    pub refitted_latents: bool,
 }
 
 impl ModelInfo {
@@ -185,6 +189,16 @@ pub trait Engine: Send + Sync + 'static {
 
     /// The model's training latents, in index order (for spread selection).
     fn training_latents(&self, model_dir: &Path) -> anyhow::Result<Vec<Vec<f32>>>;
+
+    /// The training shapes re-fitted with the network frozen (`aortagen refit`): latents
+    /// and transforms in index order; none unless every training shape has one.
+    fn refitted_latents(
+        &self,
+        model_dir: &Path,
+    ) -> anyhow::Result<Option<crate::sdf::store::refits::RefittedLatents>> {
+        let _ = model_dir;
+        Ok(None)
+    }
 
     /// The training shapes' unit-ball transforms, in index order (density samplers model
     /// them with the latents).

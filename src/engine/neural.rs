@@ -27,6 +27,7 @@ use crate::sdf::inference::novelty::{NoveltyReference, training_surface, trainin
 use crate::sdf::inference::reconstruct::{ExtractionMethod, reconstruct};
 use crate::sdf::store::LoadedModel;
 use crate::sdf::store::manifest::MANIFEST_FILE;
+use crate::sdf::store::refits::{RefitSet, RefittedLatents};
 use crate::sdf::training::config::Preset;
 use crate::sdf::training::fit::{FitSettings, fit_mesh};
 use crate::sdf::training::{TrainingObserver, TrainingRequest, train};
@@ -137,11 +138,28 @@ impl Engine for SdfEngine {
                 reconstruction_cd: fidelity.get(index).copied().flatten(),
             })
             .collect();
+        let refitted_latents = match RefitSet::load(model_dir, manifest) {
+            Ok(set) => set.is_complete(manifest),
+            Err(e) => {
+                tracing::warn!(error = %e, "the re-fitted latents are not usable");
+                false
+            }
+        };
         Ok(ModelInfo {
             latent_dim: manifest.architecture.latent_dim,
             architecture: serde_json::to_value(&manifest.architecture)?,
             training_shapes,
+            refitted_latents,
         })
+    }
+
+    fn refitted_latents(&self, model_dir: &Path) -> anyhow::Result<Option<RefittedLatents>> {
+        let cached = self.model(model_dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        let manifest = &cached.model.manifest;
+        Ok(RefitSet::load(model_dir, manifest)?.latents(manifest))
     }
 
     fn training_latents(&self, model_dir: &Path) -> anyhow::Result<Vec<Vec<f32>>> {

@@ -352,3 +352,30 @@ async fn a_model_deleted_while_a_cohort_is_posted_is_a_409_and_stores_nothing() 
         StatusCode::OK
     );
 }
+
+#[tokio::test]
+async fn refitted_latents_are_refused_for_a_model_whose_shapes_were_not_refitted() {
+    let app = spawn_app().await;
+    let sampler = |latents: &str| {
+        let mut body = cohort_body(2, 2);
+        body.as_object_mut().unwrap().remove("arity");
+        body["sampler"] = json!({ "kind": "pca_gaussian", "latents": latents });
+        body
+    };
+    let r = app.create_cohort(&sampler("refitted")).await;
+    assert_eq!(r.status, StatusCode::UNPROCESSABLE_ENTITY);
+    let p = r.json();
+    assert_eq!(
+        (p["field"].as_str(), p["rule"].as_str()),
+        (Some("sampler.latents"), Some("unavailable"))
+    );
+    assert!(
+        p["detail"].as_str().unwrap().contains("aortagen refit"),
+        "{p}"
+    );
+    assert_eq!(app.count("cohort").await, 0, "nothing was stored");
+    let r = app.create_cohort(&sampler("training")).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED);
+    let r = app.create_cohort(&sampler("recent")).await;
+    assert!(r.status.is_client_error(), "{}", r.status);
+}

@@ -361,9 +361,8 @@ fn cohort_probe(path: &[Step], value: &Value) -> Value {
         ["sampler", field] => {
             let kind = match *field {
                 "kind" => value.clone(),
-                "truncation" | "sigma_scale" | "variance_share" | "covariance" | "shrinkage" => {
-                    json!("pca_gaussian")
-                }
+                "truncation" | "sigma_scale" | "variance_share" | "covariance" | "shrinkage"
+                | "latents" => json!("pca_gaussian"),
                 "components" | "max_components" | "mixture_modes" => json!("pca_mixture"),
                 other => panic!("no sampler kind known for sampler.{other}"),
             };
@@ -445,6 +444,7 @@ async fn every_bounded_cohort_field_is_accepted_inside_and_refused_outside() {
         "sampler.components",
         "sampler.max_components",
         "sampler.mixture_modes",
+        "sampler.latents",
         "weighting",
         "selection",
     ];

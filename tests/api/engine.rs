@@ -79,6 +79,7 @@ impl Engine for AnalyticEngine {
                     reconstruction_cd: Some(0.001 * (index + 1) as f64),
                 })
                 .collect(),
+            refitted_latents: false,
         })
     }
 

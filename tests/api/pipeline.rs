@@ -7,9 +7,11 @@
 use std::path::Path;
 
 use aortagen::cli::generate::{GenerateArgs, SamplerArgs, Units, run};
+use aortagen::cli::refit::RefitArgs;
 use aortagen::cohort::targets::TargetRange;
 use aortagen::cohort::{
-    CovarianceEstimate, SamplerKind, Selection, ShapeProvenance, ShapeRecord, Weighting,
+    CovarianceEstimate, LatentSource, SamplerKind, Selection, ShapeProvenance, ShapeRecord,
+    Weighting,
 };
 use aortagen::formats::{MeshFormat, read_mesh_bytes};
 use aortagen::geometry::TriMesh;
@@ -276,6 +278,46 @@ async fn the_command_line_and_the_service_generate_the_same_cohort() {
             .iter()
             .all(|d| d["provenance"]["candidates"].is_u64())
     );
+
+    // The training shapes re-fitted after the model was registered: the service finds
+    // them, and both ways fit the density to them.
+    let refitted = Request {
+        sampler: Some(SamplerArgs {
+            latents: Some(LatentSource::Refitted),
+            ..gaussian
+        }),
+        ..Request::plain(2, 1, 13)
+    };
+    let refused = app.create_cohort(&refitted.body()).await;
+    assert_eq!(
+        refused.json()["field"],
+        "sampler.latents",
+        "not re-fitted yet"
+    );
+    aortagen::cli::refit::run(RefitArgs {
+        model: model.clone(),
+        data: None,
+        iterations: 20,
+        seed: 0,
+        resolution: 32,
+        points: 500,
+        backend: Backend::default(),
+    })
+    .unwrap();
+    let details = assert_same_cohort(&app, &model, &refitted).await;
+    let before = Request {
+        min_novelty: None,
+        ..sampled
+    };
+    let trained = through_the_cli(&model, &before);
+    for (d, (record, _)) in details.iter().zip(&trained) {
+        assert_eq!(d["provenance"]["sampler"]["latents"], "refitted");
+        assert_ne!(
+            d["volume_mm3"].as_f64(),
+            Some(record.volume_mm3),
+            "another density, another shape"
+        );
+    }
 }
 
 #[tokio::test(flavor = "multi_thread")]

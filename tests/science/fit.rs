@@ -1,9 +1,16 @@
 //! Fitting a new shape to a frozen model: a tiny model trained here on three synthetic roots,
-//! then a latent fitted from zero to one of its training meshes.
+//! then a latent fitted from zero to one of its training meshes; and re-fitting every
+//! training shape that way for density samplers (`aortagen refit`).
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use aortagen::cli::refit::{self, RefitArgs};
+use aortagen::cohort::{
+    CohortFields, CohortPlan, CohortRequest, LatentSource, ModelLatents, RequestLimits,
+    SamplerFields, SamplerKind,
+};
+use aortagen::engine::{Engine, SdfEngine};
 use aortagen::geometry::normalize::normalize_to_unit_ball;
 use aortagen::sdf::backend::Backend;
 use aortagen::sdf::data::{DataSource, PreparedDataset, load_source_meshes, prepare_shapes};
@@ -11,9 +18,11 @@ use aortagen::sdf::inference::evaluation::EvaluationSettings;
 use aortagen::sdf::inference::reconstruct::ExtractionMethod;
 use aortagen::sdf::model::network::SdfNetwork;
 use aortagen::sdf::store::LoadedModel;
+use aortagen::sdf::store::refits::RefitSet;
 use aortagen::sdf::training::fit::{
     FitError, FitSettings, fit_mesh, frozen_trainable_copy, latent_chamfer, optimise_latent,
 };
+use aortagen::sdf::training::refit::refit_settings;
 use aortagen::sdf::training::{Preset, Silent, TrainingRequest, train};
 
 const SHAPES: usize = 3;
@@ -157,4 +166,113 @@ fn the_optimised_network_keeps_its_weights_and_a_cancel_stops_the_fit() {
     assert!(matches!(result, Err(FitError::Cancelled(5))), "{result:?}");
     let bad = fit_mesh(&model, &meshes[0].1, &settings(0, 1), &mut |_| {}, None);
     assert!(matches!(bad, Err(FitError::Iterations(0))), "{bad:?}");
+}
+
+fn refit_args(model: &Path, iterations: usize) -> RefitArgs {
+    RefitArgs {
+        model: model.to_path_buf(),
+        data: None,
+        iterations,
+        seed: 4,
+        resolution: 32,
+        points: 1000,
+        backend: Backend::Flex,
+    }
+}
+
+#[test]
+fn refitting_fits_every_training_shape_resumes_exactly_and_feeds_a_density_sampler() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = train_tiny(dir.path(), 2);
+    let engine = SdfEngine::new(Backend::Flex);
+    assert!(!engine.model_info(dir.path()).unwrap().refitted_latents);
+    assert!(engine.refitted_latents(dir.path()).unwrap().is_none());
+
+    refit::run(refit_args(dir.path(), 30)).unwrap();
+    let set = RefitSet::load(dir.path(), &model.manifest).unwrap();
+    assert!(set.is_complete(&model.manifest));
+    let meshes = load_source_meshes(&model.manifest.data.source).unwrap();
+    let base = FitSettings {
+        iterations: 30,
+        evaluation: EvaluationSettings {
+            resolution: 32,
+            chamfer_points: 1000,
+            seed: 4,
+            extraction: ExtractionMethod::Fast,
+        },
+        ..FitSettings::new(4)
+    };
+    for (index, record) in set.shapes.iter().enumerate() {
+        // Each record is the shape fitted as a new patient would be, with seed 4 + 2 i.
+        let fitted = fit_mesh(
+            &model,
+            &meshes[index].1,
+            &refit_settings(&base, index),
+            &mut |_| {},
+            None,
+        )
+        .unwrap();
+        assert_eq!(record.name, model.manifest.shapes[index].name);
+        assert_eq!((record.seed, record.iterations), (4 + 2 * index as u64, 30));
+        assert_eq!(record.latent, fitted.latent, "shape {index}");
+        assert_eq!(record.chamfer, fitted.chamfer, "shape {index}");
+        assert_ne!(
+            record.latent,
+            model.latents()[index],
+            "not the trained latent"
+        );
+    }
+
+    // An interrupted run (the last record missing) resumes to the same records.
+    let mut partial = set.clone();
+    partial.shapes.pop();
+    partial.save(dir.path()).unwrap();
+    assert!(!engine.model_info(dir.path()).unwrap().refitted_latents);
+    refit::run(refit_args(dir.path(), 30)).unwrap();
+    let resumed = RefitSet::load(dir.path(), &model.manifest).unwrap();
+    let latents = |s: &RefitSet| {
+        s.shapes
+            .iter()
+            .map(|r| r.latent.clone())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(latents(&resumed), latents(&set));
+    // Resuming with other settings would mix two kinds of fit: refused.
+    partial.save(dir.path()).unwrap();
+    let err = refit::run(refit_args(dir.path(), 31)).unwrap_err();
+    assert!(err.to_string().contains("other settings"), "{err}");
+    resumed.save(dir.path()).unwrap();
+
+    // A density sampler asked for the re-fitted latents is fitted to them.
+    assert!(engine.model_info(dir.path()).unwrap().refitted_latents);
+    let fields = |latents| CohortFields::<String> {
+        count: 4,
+        seed: Some(9),
+        sampler: Some(SamplerFields {
+            kind: SamplerKind::PcaGaussian,
+            latents,
+            ..SamplerFields::default()
+        }),
+        ..CohortFields::default()
+    };
+    let read = |latents| {
+        let request = CohortRequest::parse(fields(latents), RequestLimits::NONE, || 0).unwrap();
+        let read = ModelLatents::read(&engine, dir.path(), &request, SHAPES)
+            .unwrap()
+            .unwrap();
+        let plan = CohortPlan::new(&request, SHAPES, Some(&read), Vec::new()).unwrap();
+        (read, plan)
+    };
+    let (refitted, plan) = read(Some(LatentSource::Refitted));
+    assert_eq!(*refitted.latents, latents(&resumed));
+    let transforms: Vec<_> = resumed.shapes.iter().map(|r| r.transform).collect();
+    assert_eq!(refitted.transforms, transforms);
+    let (trained, trained_plan) = read(None);
+    assert_eq!(*trained.latents, model.latents());
+    let first = |p: &CohortPlan| p.shape_spec(0).sampled.unwrap().latent;
+    assert_ne!(
+        first(&plan),
+        first(&trained_plan),
+        "another density, another draw"
+    );
 }

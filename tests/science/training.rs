@@ -506,7 +506,19 @@ mod cohort {
             ..CohortFields::default()
         };
         let request = CohortRequest::parse(fields, RequestLimits::NONE, || seed)?;
-        request.check_model(SHAPES)?;
+        let model = aortagen::engine::ModelInfo {
+            latent_dim: 4,
+            architecture: serde_json::Value::Null,
+            training_shapes: (0..SHAPES)
+                .map(|index| aortagen::engine::TrainingShapeInfo {
+                    index,
+                    name: format!("shape-{index}"),
+                    reconstruction_cd: None,
+                })
+                .collect(),
+            refitted_latents: false,
+        };
+        request.check_model(&model)?;
         Ok(request)
     }
 

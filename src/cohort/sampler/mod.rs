@@ -88,6 +88,29 @@ pub enum CovarianceEstimate {
     LedoitWolf,
 }
 
+/// Which latents a density sampler is fitted to.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    utoipa::ToSchema,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum LatentSource {
+    /// The latents training optimised jointly with the network.
+    #[default]
+    Training,
+    /// The training shapes fitted again with the network frozen (`aortagen refit`), as a
+    /// new patient is fitted: they spread the way new patients land in latent space.
+    Refitted,
+}
+
 /// A cohort request's `sampler` as it arrives.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -122,6 +145,10 @@ pub struct SamplerFields {
     /// `pca_mixture`: leading modes the mixture models (≥ 1, default 4).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mixture_modes: Option<i64>,
+    /// Density samplers: the latents the density is fitted to (default `training`;
+    /// `refitted` needs a model whose training shapes were re-fitted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latents: Option<LatentSource>,
 }
 
 /// A checked sampler.
@@ -129,8 +156,9 @@ pub struct SamplerFields {
 pub enum SamplerChoice {
     /// Convex combinations of training latents.
     Convex,
-    /// A density model of the training latents (with their transforms).
-    Density(SamplerConfig),
+    /// A density model of the training shapes' latents (with their transforms), fitted to
+    /// the latents the source names.
+    Density(SamplerConfig, LatentSource),
 }
 
 impl SamplerChoice {
@@ -192,20 +220,28 @@ impl SamplerChoice {
             f.mixture_modes.is_some() && !mixture,
             "pca_mixture",
         )?;
+        only(
+            "latents",
+            f.latents.is_some() && !(gaussian || mixture),
+            density,
+        )?;
         let modes = mode_selection(f.variance_share)?;
+        let latents = f.latents.unwrap_or_default();
         Ok(match f.kind {
             SamplerKind::Convex => Self::Convex,
-            SamplerKind::PcaGaussian => {
-                Self::Density(SamplerConfig::PcaGaussian(PcaGaussianConfig {
+            SamplerKind::PcaGaussian => Self::Density(
+                SamplerConfig::PcaGaussian(PcaGaussianConfig {
                     modes,
                     truncation: positive("truncation", f.truncation)?,
                     sigma_scale: positive("sigma_scale", f.sigma_scale)?.unwrap_or(1.0),
                     shrinkage: shrinkage(f)?,
-                }))
-            }
-            SamplerKind::PcaMixture => {
-                Self::Density(SamplerConfig::PcaMixture(mixture_config(f, modes)?))
-            }
+                }),
+                latents,
+            ),
+            SamplerKind::PcaMixture => Self::Density(
+                SamplerConfig::PcaMixture(mixture_config(f, modes)?),
+                latents,
+            ),
         })
     }
 
@@ -214,9 +250,17 @@ impl SamplerChoice {
         matches!(self, Self::Convex)
     }
 
+    /// The latents a density sampler is fitted to (none: convex combinations).
+    pub fn latent_source(&self) -> Option<LatentSource> {
+        match self {
+            Self::Convex => None,
+            Self::Density(_, latents) => Some(*latents),
+        }
+    }
+
     /// The sampler with every default filled in, as provenance records it (none: convex).
     pub fn recorded(&self) -> Option<SamplerFields> {
-        let Self::Density(config) = self else {
+        let Self::Density(config, latents) = self else {
             return None;
         };
         let share = |modes: &ModeSelection| match modes {
@@ -237,6 +281,7 @@ impl SamplerChoice {
                     _ => None,
                 },
                 variance_share: share(&g.modes),
+                latents: Some(*latents),
                 ..SamplerFields::default()
             },
             SamplerConfig::PcaMixture(m) => {
@@ -250,6 +295,7 @@ impl SamplerChoice {
                     components,
                     max_components,
                     mixture_modes: Some(m.mixture_modes as i64),
+                    latents: Some(*latents),
                     ..SamplerFields::default()
                 }
             }
@@ -383,7 +429,7 @@ mod tests {
             (Some(1.0), Some(1.0), None)
         );
         let m = SamplerChoice::parse(Some(&fields(SamplerKind::PcaMixture))).unwrap();
-        let SamplerChoice::Density(SamplerConfig::PcaMixture(config)) = &m else {
+        let SamplerChoice::Density(SamplerConfig::PcaMixture(config), _) = &m else {
             panic!("{m:?}");
         };
         assert_eq!(
@@ -401,12 +447,21 @@ mod tests {
         };
         let lw = shrunk(Some(CovarianceEstimate::LedoitWolf), None);
         let fixed = shrunk(None, Some(0.3));
-        let SamplerChoice::Density(SamplerConfig::PcaGaussian(config)) = &fixed else {
+        let SamplerChoice::Density(SamplerConfig::PcaGaussian(config), _) = &fixed else {
             panic!("{fixed:?}");
         };
         assert_eq!(config.shrinkage, Some(Shrinkage::Intensity(0.3)));
+        let refitted = SamplerChoice::parse(Some(&SamplerFields {
+            latents: Some(LatentSource::Refitted),
+            ..fields(SamplerKind::PcaMixture)
+        }))
+        .unwrap();
+        assert_eq!(refitted.latent_source(), Some(LatentSource::Refitted));
+        assert_eq!(g.latent_source(), Some(LatentSource::Training));
+        assert_eq!(g.recorded().unwrap().latents, Some(LatentSource::Training));
+        assert_eq!(SamplerChoice::Convex.latent_source(), None);
         // The recorded form parses back to the same sampler.
-        for choice in [g, m, lw, fixed] {
+        for choice in [g, m, lw, fixed, refitted] {
             let again = SamplerChoice::parse(choice.recorded().as_ref()).unwrap();
             assert_eq!(again, choice);
         }
@@ -437,6 +492,14 @@ mod tests {
                     ..fields(SamplerKind::Convex)
                 },
                 "sampler.variance_share",
+                "sampler-parameter",
+            ),
+            (
+                SamplerFields {
+                    latents: Some(LatentSource::Refitted),
+                    ..fields(SamplerKind::Convex)
+                },
+                "sampler.latents",
                 "sampler-parameter",
             ),
             (

@@ -15,7 +15,7 @@ use super::error::{ApiError, Problem, Result};
 use super::extractors::{ApiJson, ApiQuery, parse_id};
 use super::jobs::stop_job;
 use crate::cohort::targets::feasibility::check_feasible;
-use crate::cohort::{CohortRequest, RequestLimits, Targets};
+use crate::cohort::{CohortRequest, LatentSource, RequestLimits, Targets};
 use crate::db::states::{JobStatus, ModelStatus};
 use crate::db::{self, cohorts::CohortRow, models::ModelRow};
 use crate::engine::ModelInfo;
@@ -72,7 +72,11 @@ async fn create_cohort(
             return Err(ApiError::Conflict(msg));
         }
     };
-    request.check_model(info.training_shape_count())?;
+    let mut info = info.clone();
+    if request.sampler.latent_source() == Some(LatentSource::Refitted) {
+        info.refitted_latents = has_refitted_latents(&state, &model).await?;
+    }
+    request.check_model(&info)?;
     let reconstructed =
         db::novelty_surfaces::stored_indices(&state.pool, &model.model_id, request.resolution)
             .await?
@@ -80,7 +84,7 @@ async fn create_cohort(
     let setup_shapes = info.training_shape_count().saturating_sub(reconstructed);
     request.check_budget_with_setup(setup_shapes, state.config.max_cohort_voxels)?;
     if let Some(search) = &request.targets {
-        check_targets(&state, &model, info, &search.targets).await?;
+        check_targets(&state, &model, &info, &search.targets).await?;
     }
     if !request.anchors.is_empty() {
         crate::http::anchors::check_cohort_anchors(&state, &model.model_id, &request.anchors)
@@ -115,6 +119,24 @@ async fn create_cohort(
 
     let cohort = load(&state, cohort_id, &cohort_id.to_string()).await?;
     Ok(accepted(cohort, false))
+}
+
+/// Whether every training shape of the model has a re-fitted latent now: asked of the
+/// engine, since `aortagen refit` may have run on the model's directory after the model
+/// was registered. An unreadable file counts as none (and is logged).
+async fn has_refitted_latents(state: &AppState, model: &ModelRow) -> Result<bool> {
+    let model_dir = state.jobs.model_dir(model).await?;
+    let engine = state.jobs.engine.clone();
+    let found = tokio::task::spawn_blocking(move || engine.refitted_latents(&model_dir))
+        .await
+        .map_err(|e| anyhow::anyhow!("reading the re-fitted latents failed: {e}"))?;
+    Ok(match found {
+        Ok(latents) => latents.is_some(),
+        Err(e) => {
+            tracing::warn!(model_id = %model.model_id, error = %e, "re-fitted latents unreadable");
+            false
+        }
+    })
 }
 
 /// Checks targets against the model's training shapes. The first targeted request on a

@@ -40,6 +40,27 @@ pub struct Anchor {
     pub created_unix: u64,
 }
 
+impl Anchor {
+    /// Checks the latent's length and values and the transform: the rules every fitted
+    /// latent kept beside a model obeys (the reason when one is broken).
+    pub fn check(&self, latent_dim: usize) -> Result<(), String> {
+        if self.latent.len() != latent_dim {
+            return Err(format!(
+                "the latent has {} values, the model's latent dimension is {latent_dim}",
+                self.latent.len()
+            ));
+        }
+        if self.latent.iter().any(|v| !v.is_finite()) || !self.chamfer.is_finite() {
+            return Err("the latent or its Chamfer distance is not finite".into());
+        }
+        let t = &self.transform;
+        if !(t.radius.is_finite() && t.radius > 0.0 && t.centre.iter().all(|c| c.is_finite())) {
+            return Err("the transform needs a finite centre and radius > 0".into());
+        }
+        Ok(())
+    }
+}
+
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AnchorSet {
@@ -151,23 +172,7 @@ impl AnchorSet {
                 "the model already has an anchor of this name".into(),
             ));
         }
-        if anchor.latent.len() != latent_dim {
-            return Err(reject(format!(
-                "the latent has {} values, the model's latent dimension is {latent_dim}",
-                anchor.latent.len()
-            )));
-        }
-        if anchor.latent.iter().any(|v| !v.is_finite()) || !anchor.chamfer.is_finite() {
-            return Err(reject(
-                "the latent or its Chamfer distance is not finite".into(),
-            ));
-        }
-        let t = &anchor.transform;
-        if !(t.radius.is_finite() && t.radius > 0.0 && t.centre.iter().all(|c| c.is_finite())) {
-            return Err(reject(
-                "the transform needs a finite centre and radius > 0".into(),
-            ));
-        }
+        anchor.check(latent_dim).map_err(reject)?;
         self.anchors.push(anchor);
         Ok(())
     }
@@ -227,7 +232,7 @@ impl AnchorSet {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::sdf::store::manifest::FileRecord;
 
@@ -247,7 +252,7 @@ mod tests {
         }
     }
 
-    fn manifest(sha: &str) -> ModelManifest {
+    pub(crate) fn manifest(sha: &str) -> ModelManifest {
         let setup = crate::sdf::training::config::Preset::Cpu.setup(0);
         ModelManifest {
             format: String::new(),

@@ -8,6 +8,7 @@
 
 pub mod anchors;
 pub mod manifest;
+pub mod refits;
 
 use std::path::{Path, PathBuf};
 

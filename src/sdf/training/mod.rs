@@ -11,6 +11,7 @@ pub mod config;
 pub mod fit;
 pub mod heldout;
 pub mod loss;
+pub mod refit;
 pub mod step;
 
 use std::path::{Path, PathBuf};
