@@ -2,8 +2,9 @@
 # Density samplers fitted to re-fitted latents (docs/representative/README.md, "Samplers fitted
 # to re-fitted latents"), on the model run.sh leaves in OUT_DIR: every training shape is
 # fitted once more with the network frozen, as a new patient is (`aortagen refit`, about
-# 40 s per shape, resumable), then pca-gaussian and gmm-k2 are fitted to those latents
-# (`--latents refitted`) over cohort seeds 2026–2028 and validated at 10 000 points against
+# 40 s per shape, resumable), then pca-gaussian (with the sample and with the Ledoit–Wolf
+# covariance) and gmm-k2 are fitted to those latents (`--latents refitted`) over cohort
+# seeds 2026–2028 and validated at 10 000 points against
 # the held-out shapes (evaluation seed 2026), and seed 2026 against the training shapes.
 #   docs/representative/refitted.sh OUT_DIR    (AORTAGEN=path/to/binary as in run.sh)
 # Every step is skipped when its output exists. Summary: python3 docs/representative/table.py
@@ -46,6 +47,11 @@ run() { # NAME SEED GENERATE-FLAGS...: report NAME-cSEED-v2026
 for seed in ${SEEDS:-2026 2027 2028}; do
     run gmm-k2-refitted "$seed" --sampler pca-mixture --components 2 --latents refitted
     run pca-refitted "$seed" --sampler pca-gaussian --latents refitted
+done
+# Ledoit–Wolf on the re-fitted latents: 80 latents in 68 dimensions leave the trailing
+# modes of the sample covariance too narrow for the held-out latents.
+for seed in ${SEEDS:-2026 2027 2028}; do
+    run pca-lw-refitted "$seed" --sampler pca-gaussian --covariance ledoit-wolf --latents refitted
 done
 validate gmm-k2-refitted-c2026-training "$dir/gmm-k2-refitted-c2026" training 2000
 validate pca-refitted-c2026-training "$dir/pca-refitted-c2026" training 2000
