@@ -17,16 +17,12 @@ source "$(dirname "$0")/../experiment.sh"
 model="$out/model-80"
 noise="$out/noise"
 mkdir -p "$noise"
-criteria='{"nna_max": 0.55, "cov_at_least_baseline": true, "pairwise_median_tolerance": 0.15, "dcr_ratio_min": 1.0, "ks_p_min": 0.05}'
+source docs/representative/common.sh
 
 cohort() { # NAME SEED RESOLUTION GENERATE-FLAGS...
-    local name="$1" seed="$2" resolution="$3"
-    shift 3
-    [ -f "$noise/$name/shape_0099.json" ] && return
-    echo "== $name: seed $seed, ${resolution}³, $*"
-    timed "$name" "$bin" generate --model "$model" --count 100 --seed "$seed" \
-        --resolution "$resolution" --novelty-points 10000 --format ply \
-        --out "$noise/$name" "$@" > "$noise/$name.log" 2>&1
+    local name="$1"
+    shift
+    generate_cohort "$noise/$name" "$model" "$@"
 }
 reconstructions() { # RESOLUTION: the training shapes meshed alone, as a cohort directory
     local resolution="$1" dir="$noise/reconstructions-$1"
@@ -40,13 +36,7 @@ reconstructions() { # RESOLUTION: the training shapes meshed alone, as a cohort 
     mv "$dir.part" "$dir"
 }
 validate() { # NAME COHORT-DIR EVALUATION-SEED
-    local name="$1" dir="$2" seed="$3"
-    local report="$noise/$name-v$seed"
-    [ -f "$report.json" ] && return
-    echo "== validate $name with evaluation seed $seed"
-    timed "validate $name v$seed" "$bin" validate --cohort "$dir" --reference heldout \
-        --model "$model" --criteria "$criteria" --points 10000 --seed "$seed" \
-        --json "$report.json" --out "$report.html" > "$report.log" 2>&1
+    validate_cohort "$noise/$1-v$3" "$2" "$model" heldout 10000 "$3"
 }
 
 for seed in 2027 2028; do

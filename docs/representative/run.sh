@@ -10,7 +10,6 @@ set -euo pipefail
 data="${1:?usage: run.sh DATA_DIR [OUT_DIR]}"
 out="${2:-/tmp/aortagen-representative}"
 resolution="${RESOLUTION:-64}"
-count="${COUNT:-100}"
 seed="${SEED:-2026}"
 points="${POINTS:-2000}"
 source "$(dirname "$0")/../experiment.sh"
@@ -28,16 +27,11 @@ if [ "${EVALUATE:-1}" != 0 ] && [ ! -f "$model/evaluation.json" ]; then
         --json "$model/evaluation.json" > "$out/evaluate.log" 2>&1
 fi
 
+source docs/representative/common.sh
 cohort() { # NAME GENERATE-FLAGS...
     local name="$1"
     shift
-    if [ -f "$out/cohorts/$name/shape_$(printf %04d $((count - 1))).json" ]; then
-        return
-    fi
-    echo "== $name: $*"
-    timed "$name" "$bin" generate --model "$model" --count "$count" --seed "$seed" \
-        --resolution "$resolution" --novelty-points 10000 --format ply \
-        --out "$out/cohorts/$name" "$@" > "$out/cohorts/$name.log" 2>&1
+    generate_cohort "$out/cohorts/$name" "$model" "$seed" "$resolution" "$@"
 }
 mkdir -p "$out/cohorts"
 cohort convex-a2 --arity 2
@@ -54,16 +48,8 @@ cohort gmm-k2 --sampler pca-mixture --components 2
 cohort gmm-k4 --sampler pca-mixture --components 4
 cohort gmm-bic --sampler pca-mixture --max-components 4
 
-# The goal figures as acceptance criteria, set before any validation runs.
-criteria='{"nna_max": 0.55, "cov_at_least_baseline": true, "pairwise_median_tolerance": 0.15, "dcr_ratio_min": 1.0, "ks_p_min": 0.05}'
 validate() { # NAME REFERENCE
-    local name="$1" reference="$2"
-    local report="$out/validation/$name-$reference"
-    [ -f "$report.json" ] && return
-    echo "== validate $name against $reference"
-    timed "validate $name $reference" "$bin" validate --cohort "$out/cohorts/$name" \
-        --reference "$reference" --model "$model" --criteria "$criteria" --points "$points" \
-        --seed "$seed" --json "$report.json" --out "$report.html" > "$report.log" 2>&1
+    validate_cohort "$out/validation/$1-$2" "$out/cohorts/$1" "$model" "$2" "$points" "$seed"
 }
 mkdir -p "$out/validation"
 cohorts=(convex-a2 convex-a4 convex-a8 convex-a4-noise1 pca pca-t3 pca-t2 pca-t1.5 pca-s1.1 pca-s1.2 gmm-k2 gmm-k4 gmm-bic)

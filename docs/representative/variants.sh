@@ -17,26 +17,16 @@ source "$(dirname "$0")/../experiment.sh"
 model="$out/model-80"
 dir="$out/variants"
 mkdir -p "$dir"
-criteria='{"nna_max": 0.55, "cov_at_least_baseline": true, "pairwise_median_tolerance": 0.15, "dcr_ratio_min": 1.0, "ks_p_min": 0.05}'
+source docs/representative/common.sh
 
 validate() { # REPORT-NAME COHORT-DIR REFERENCE POINTS: writes $dir/REPORT-NAME.{json,html,log}
-    local report="$dir/$1"
-    [ -f "$report.json" ] && return
-    echo "== validate $1"
-    timed "validate $1" "$bin" validate --cohort "$2" --reference "$3" \
-        --model "$model" --criteria "$criteria" --points "$4" --seed 2026 \
-        --json "$report.json" --out "$report.html" > "$report.log" 2>&1
+    validate_cohort "$dir/$1" "$2" "$model" "$3" "$4" 2026
 }
 
-run() { # NAME SEED GENERATE-FLAGS...: report NAME-cSEED-v2026
+run() { # NAME SEED GENERATE-FLAGS...: cohort $dir/NAME-cSEED, report NAME-cSEED-v2026
     local name="$1-c$2" seed="$2"
     shift 2
-    if [ ! -f "$dir/$name/shape_0099.json" ]; then
-        echo "== $name: $*"
-        timed "$name" "$bin" generate --model "$model" --count 100 --seed "$seed" \
-            --resolution 64 --novelty-points 10000 --format ply \
-            --out "$dir/$name" "$@" > "$dir/$name.log" 2>&1
-    fi
+    generate_cohort "$dir/$name" "$model" "$seed" 64 "$@"
     validate "$name-v2026" "$dir/$name" heldout 10000
 }
 

@@ -3,12 +3,13 @@
 //! An anchor is a fitted latent ([`crate::sdf::training::fit`]) with its unit-ball transform and its
 //! reconstruction Chamfer distance. Anchors live in their own file so the manifest and its
 //! weights hash (the model's identity) never change; the file records the weights hash it
-//! belongs to and is rejected for any other model. Written to a temporary name and renamed.
+//! belongs to and is rejected for any other model ([`super::sidecar`]).
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use super::sidecar::{Sidecar, SidecarError};
 use crate::geometry::normalize::UnitBallTransform;
 use crate::sdf::store::manifest::ModelManifest;
 
@@ -18,6 +19,13 @@ pub const ANCHORS_FILE: &str = "anchors.json";
 pub const ANCHORS_FORMAT: &str = "aortagen-anchors";
 /// The layout this build reads and writes.
 pub const ANCHORS_VERSION: u32 = 1;
+
+const ANCHORS: Sidecar = Sidecar {
+    file: ANCHORS_FILE,
+    format: ANCHORS_FORMAT,
+    version: ANCHORS_VERSION,
+    kind: "anchors",
+};
 
 /// One fitted shape.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -77,22 +85,9 @@ pub struct AnchorSet {
 /// Why an anchors file or a new anchor is refused.
 #[derive(Debug, thiserror::Error)]
 pub enum AnchorError {
-    /// The file cannot be read or written.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The operating-system error.
-        source: std::io::Error,
-    },
-    /// The file breaks a rule.
-    #[error("{path} is not a valid anchors file: {reason}")]
-    Invalid {
-        /// The file.
-        path: String,
-        /// The broken rule.
-        reason: String,
-    },
+    /// The file cannot be read, written or used.
+    #[error(transparent)]
+    File(#[from] SidecarError),
     /// A new anchor breaks a rule.
     #[error("anchor {name:?}: {reason}")]
     Rejected {
@@ -117,43 +112,14 @@ impl AnchorSet {
     /// The anchors of the model in `dir` (empty when it has no file), checked against
     /// `manifest`.
     pub fn load(dir: &Path, manifest: &ModelManifest) -> Result<Self, AnchorError> {
-        let path = dir.join(ANCHORS_FILE);
-        let shown = path.display().to_string();
-        let bytes = match std::fs::read(&path) {
-            Ok(b) => b,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Self::empty(manifest)),
-            Err(source) => {
-                return Err(AnchorError::Io {
-                    path: shown,
-                    source,
-                });
-            }
+        let Some(set) = ANCHORS.read::<Self>(dir, &manifest.weights.sha256)? else {
+            return Ok(Self::empty(manifest));
         };
-        let invalid = |reason: String| AnchorError::Invalid {
-            path: shown.clone(),
-            reason,
-        };
-        let set: Self =
-            serde_json::from_slice(&bytes).map_err(|e| invalid(format!("not readable: {e}")))?;
-        if set.format != ANCHORS_FORMAT {
-            return Err(invalid(format!("\"format\" is not \"{ANCHORS_FORMAT}\"")));
-        }
-        if set.format_version != ANCHORS_VERSION {
-            return Err(invalid(format!(
-                "format version {} (this build reads {ANCHORS_VERSION})",
-                set.format_version
-            )));
-        }
-        if set.weights_sha256 != manifest.weights.sha256 {
-            return Err(invalid(
-                "it belongs to other weights (weights_sha256 differs from the manifest)".into(),
-            ));
-        }
         let mut checked = Self::empty(manifest);
         for anchor in set.anchors {
             checked
                 .add(anchor, manifest.architecture.latent_dim)
-                .map_err(|e| invalid(e.to_string()))?;
+                .map_err(|e| ANCHORS.invalid(dir, e.to_string()))?;
         }
         Ok(checked)
     }
@@ -219,15 +185,7 @@ impl AnchorSet {
 
     /// Writes the set to `dir/anchors.json` (temporary file, then rename).
     pub fn save(&self, dir: &Path) -> Result<(), AnchorError> {
-        let path = dir.join(ANCHORS_FILE);
-        let tmp = dir.join(format!(".{ANCHORS_FILE}.tmp"));
-        let io = |source| AnchorError::Io {
-            path: path.display().to_string(),
-            source,
-        };
-        let json = serde_json::to_vec_pretty(self).map_err(|e| io(std::io::Error::other(e)))?;
-        std::fs::write(&tmp, json).map_err(io)?;
-        std::fs::rename(&tmp, &path).map_err(io)
+        Ok(ANCHORS.write(dir, self)?)
     }
 }
 

@@ -9,6 +9,7 @@
 pub mod anchors;
 pub mod manifest;
 pub mod refits;
+pub mod sidecar;
 
 use std::path::{Path, PathBuf};
 

@@ -10,13 +10,14 @@
 //! One record per training shape, in training-index order, named as in the manifest; the
 //! file may hold a prefix while `aortagen refit` runs (it resumes from there), and only a
 //! complete file is used for sampling. Like `anchors.json` it records the weights hash it
-//! belongs to and is refused for any other model; written to a temporary name and renamed.
+//! belongs to and is refused for any other model ([`super::sidecar`]).
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use super::anchors::Anchor;
+use super::sidecar::{Sidecar, SidecarError};
 use crate::geometry::normalize::UnitBallTransform;
 use crate::sdf::store::manifest::ModelManifest;
 
@@ -26,6 +27,13 @@ pub const REFITS_FILE: &str = "refits.json";
 pub const REFITS_FORMAT: &str = "aortagen-refits";
 /// The layout this build reads and writes.
 pub const REFITS_VERSION: u32 = 1;
+
+const REFITS: Sidecar = Sidecar {
+    file: REFITS_FILE,
+    format: REFITS_FORMAT,
+    version: REFITS_VERSION,
+    kind: "refits",
+};
 
 /// The whole file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -43,22 +51,9 @@ pub struct RefitSet {
 /// Why a refits file or a new record is refused.
 #[derive(Debug, thiserror::Error)]
 pub enum RefitError {
-    /// The file cannot be read or written.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The operating-system error.
-        source: std::io::Error,
-    },
-    /// The file breaks a rule.
-    #[error("{path} is not a valid refits file: {reason}")]
-    Invalid {
-        /// The file.
-        path: String,
-        /// The broken rule.
-        reason: String,
-    },
+    /// The file cannot be read, written or used.
+    #[error(transparent)]
+    File(#[from] SidecarError),
     /// A new record breaks a rule.
     #[error("re-fitted shape {name:?}: {reason}")]
     Rejected {
@@ -86,43 +81,14 @@ impl RefitSet {
     /// The re-fitted shapes of the model in `dir` (empty when it has no file), checked
     /// against `manifest`.
     pub fn load(dir: &Path, manifest: &ModelManifest) -> Result<Self, RefitError> {
-        let path = dir.join(REFITS_FILE);
-        let shown = path.display().to_string();
-        let bytes = match std::fs::read(&path) {
-            Ok(b) => b,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Self::empty(manifest)),
-            Err(source) => {
-                return Err(RefitError::Io {
-                    path: shown,
-                    source,
-                });
-            }
+        let Some(set) = REFITS.read::<Self>(dir, &manifest.weights.sha256)? else {
+            return Ok(Self::empty(manifest));
         };
-        let invalid = |reason: String| RefitError::Invalid {
-            path: shown.clone(),
-            reason,
-        };
-        let set: Self =
-            serde_json::from_slice(&bytes).map_err(|e| invalid(format!("not readable: {e}")))?;
-        if set.format != REFITS_FORMAT {
-            return Err(invalid(format!("\"format\" is not \"{REFITS_FORMAT}\"")));
-        }
-        if set.format_version != REFITS_VERSION {
-            return Err(invalid(format!(
-                "format version {} (this build reads {REFITS_VERSION})",
-                set.format_version
-            )));
-        }
-        if set.weights_sha256 != manifest.weights.sha256 {
-            return Err(invalid(
-                "it belongs to other weights (weights_sha256 differs from the manifest)".into(),
-            ));
-        }
         let mut checked = Self::empty(manifest);
         for shape in set.shapes {
             checked
                 .push(shape, manifest)
-                .map_err(|e| invalid(e.to_string()))?;
+                .map_err(|e| REFITS.invalid(dir, e.to_string()))?;
         }
         Ok(checked)
     }
@@ -171,15 +137,7 @@ impl RefitSet {
 
     /// Writes the set to `dir/refits.json` (temporary file, then rename).
     pub fn save(&self, dir: &Path) -> Result<(), RefitError> {
-        let path = dir.join(REFITS_FILE);
-        let tmp = dir.join(format!(".{REFITS_FILE}.tmp"));
-        let io = |source| RefitError::Io {
-            path: path.display().to_string(),
-            source,
-        };
-        let json = serde_json::to_vec_pretty(self).map_err(|e| io(std::io::Error::other(e)))?;
-        std::fs::write(&tmp, json).map_err(io)?;
-        std::fs::rename(&tmp, &path).map_err(io)
+        Ok(REFITS.write(dir, self)?)
     }
 }
 
