@@ -260,7 +260,7 @@ pub fn run(args: GenerateArgs) -> anyhow::Result<()> {
     );
     let setup = CohortSetup::compute(&*engine, &args.model, &request, count, &cancel)?;
     print_target_ranges(&request, &setup);
-    let latents = ModelLatents::read(&*engine, &args.model, &request, count)?;
+    let latents = ModelLatents::read(&*engine, &args.model, &request, count, None)?;
     let plan = CohortPlan::new(&request, count, latents.as_ref(), anchors)?;
     if let Some(sampler) = &plan.sampler {
         let s = sampler.summary();

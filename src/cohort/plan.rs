@@ -19,6 +19,7 @@ use super::selection::{Selection, choose_distinct, select_spread};
 use super::weights::WeightChoice;
 use crate::engine::{AnchorLatent, Engine, ShapeSpec};
 use crate::geometry::normalize::UnitBallTransform;
+use crate::sdf::store::refits::RefittedLatents;
 
 /// The model's training latents (and, for density samplers, their transforms), which
 /// spread selection picks from and density samplers are fitted to: the latents from
@@ -33,25 +34,33 @@ pub struct ModelLatents {
 
 impl ModelLatents {
     /// What `request` needs of the model in `model_dir` (none when it needs nothing),
-    /// checked to cover its `count` training shapes.
+    /// checked to cover its `count` training shapes. Re-fitted latents come from `refitted`
+    /// when given (the service's own refit of the model), else from the engine (the
+    /// `refits.json` of `aortagen refit` beside the model).
     pub fn read<A>(
         engine: &dyn Engine,
         model_dir: &Path,
         request: &CohortRequest<A>,
         count: usize,
+        refitted: Option<RefittedLatents>,
     ) -> anyhow::Result<Option<Self>> {
         let density = !request.sampler.is_convex();
         if !(density || request.selection.needs_latents()) {
             return Ok(None);
         }
         if request.sampler.latent_source() == Some(LatentSource::Refitted) {
-            let (latents, transforms) = engine
-                .refitted_latents(model_dir)
-                .context("cannot read the re-fitted latents")?
-                .context(
+            let from_engine = || {
+                engine
+                    .refitted_latents(model_dir)
+                    .context("cannot read the re-fitted latents")
+            };
+            let (latents, transforms) = match refitted {
+                Some(given) => given,
+                None => from_engine()?.context(
                     "the model has no re-fitted latents for every training shape \
-                     (`aortagen refit` adds them)",
-                )?;
+                     (`aortagen refit` or POST /v1/models/{id}/refit adds them)",
+                )?,
+            };
             anyhow::ensure!(
                 latents.len() == count && transforms.len() == count,
                 "the engine returned {} re-fitted latents for {count} training shapes",

@@ -196,8 +196,8 @@ impl<A: PartialEq + Display + Clone> CohortRequest<A> {
             return Err(RequestError::new(
                 "sampler.latents",
                 "unavailable",
-                "the model's training shapes were not re-fitted (`aortagen refit` fits them \
-                 with the network frozen); use \"training\"",
+                "the model's training shapes were not re-fitted (POST /v1/models/{id}/refit or \
+                 `aortagen refit` fits them with the network frozen); use \"training\"",
             ));
         }
         if let SamplerChoice::Density(crate::latent_models::SamplerConfig::PcaMixture(m), _) =
@@ -733,16 +733,8 @@ mod tests {
 
     fn model(shapes: usize, refitted_latents: bool) -> ModelInfo {
         ModelInfo {
-            latent_dim: 2,
-            architecture: serde_json::Value::Null,
-            training_shapes: (0..shapes)
-                .map(|index| crate::engine::TrainingShapeInfo {
-                    index,
-                    name: format!("s{index}"),
-                    reconstruction_cd: None,
-                })
-                .collect(),
             refitted_latents,
+            ..ModelInfo::with_shapes(2, (0..shapes).map(|i| format!("s{i}")))
         }
     }
 

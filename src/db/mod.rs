@@ -12,6 +12,7 @@ pub mod jobs;
 pub mod models;
 pub mod novelty_surfaces;
 pub mod references;
+pub mod refits;
 pub mod shapes;
 pub mod simulations;
 pub mod states;

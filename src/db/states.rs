@@ -90,6 +90,8 @@ column_enum! {
         Fit = "fit",
         /// Validate a cohort against a reference population.
         Validation = "validation",
+        /// Fits a model's training shapes again with the network frozen.
+        Refit = "refit",
     }
 }
 
@@ -126,6 +128,8 @@ column_enum! {
         Fit = "fit",
         /// A whole validation.
         Validation = "validation",
+        /// One training shape re-fitted with the network frozen.
+        Refit = "refit",
     }
 }
 

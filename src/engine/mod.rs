@@ -34,6 +34,26 @@ pub struct ModelInfo {
 }
 
 impl ModelInfo {
+    /// A model of `latent_dim` with training shapes named by `names` (in latent order), no
+    /// reconstruction figures, no re-fitted latents and no architecture description: what
+    /// the request checks look at.
+    pub fn with_shapes(latent_dim: usize, names: impl IntoIterator<Item = String>) -> Self {
+        Self {
+            latent_dim,
+            architecture: serde_json::Value::Null,
+            training_shapes: names
+                .into_iter()
+                .enumerate()
+                .map(|(index, name)| TrainingShapeInfo {
+                    index,
+                    name,
+                    reconstruction_cd: None,
+                })
+                .collect(),
+            refitted_latents: false,
+        }
+    }
+
     /// Number of training shapes (the upper bound of a cohort's arity).
     pub fn training_shape_count(&self) -> usize {
         self.training_shapes.len()
@@ -170,6 +190,15 @@ pub struct FitSpec {
     pub mesh_sha256: Option<String>,
 }
 
+/// How a model's training shapes are fitted again with the network frozen (a refit).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RefitSpec {
+    /// Adam steps of every fit.
+    pub iterations: usize,
+    /// Seed of training shape 0's fit; shape i uses `seed + 2 i` (as `aortagen refit`).
+    pub seed: u64,
+}
+
 /// A fitted latent.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FittedAnchor {
@@ -292,6 +321,23 @@ pub trait Engine: Send + Sync + 'static {
     ) -> anyhow::Result<FittedAnchor> {
         let _ = (model_dir, spec, cancel, progress);
         anyhow::bail!("this engine cannot fit new shapes")
+    }
+
+    /// Fits training shape `index` of the model in `model_dir` again, its network frozen,
+    /// exactly as `aortagen refit` fits it (the same latent for the same settings), from the
+    /// training data the model's manifest names. `progress` holds the steps done. Returns
+    /// early with an error once `cancel` becomes true. Engines without a trainable model
+    /// refuse.
+    fn refit_training_shape(
+        &self,
+        model_dir: &Path,
+        index: usize,
+        spec: &RefitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        let _ = (model_dir, index, spec, cancel, progress);
+        anyhow::bail!("this engine cannot re-fit training shapes")
     }
 }
 

@@ -12,15 +12,15 @@ use rayon::prelude::*;
 
 use super::cache::{BoundedCache, DirStamp};
 use super::{
-    Engine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
-    TrainingSpec,
+    Engine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, RefitSpec, ShapeSpec,
+    TrainingShapeInfo, TrainingSpec,
 };
 use crate::geometry::TriMesh;
 use crate::geometry::chamfer::{ChamferIndex, DEFAULT_CHAMFER_POINTS, chamfer_between_serial};
 use crate::geometry::sampling::sample_surface;
 use crate::sdf::backend::Backend;
 use crate::sdf::data::DataSource;
-use crate::sdf::data::holdout::HoldoutSpec;
+use crate::sdf::data::holdout::{HoldoutSpec, load_split};
 use crate::sdf::inference::evaluation::EvaluationReport;
 use crate::sdf::inference::mixing::{AnchorPart, Mixture, anchored_latent};
 use crate::sdf::inference::novelty::{NoveltyReference, training_surface, training_surfaces};
@@ -30,6 +30,7 @@ use crate::sdf::store::manifest::MANIFEST_FILE;
 use crate::sdf::store::refits::{RefitSet, RefittedLatents};
 use crate::sdf::training::config::Preset;
 use crate::sdf::training::fit::{FitSettings, fit_mesh};
+use crate::sdf::training::refit::refit_settings;
 use crate::sdf::training::{TrainingObserver, TrainingRequest, train};
 
 /// File in a model directory holding `aortagen evaluate --json` output; when present, its
@@ -51,6 +52,9 @@ pub struct SdfEngine {
     models: Mutex<BoundedCache<ModelKey, Arc<Mutex<CachedModel>>>>,
     /// Training surfaces for novelty, by model directory, content and resolution.
     references: Mutex<BoundedCache<ReferenceKey, Arc<NoveltyReference>>>,
+    /// The training meshes of the model last re-fitted, so a refit's tasks read its data
+    /// once, not once per shape.
+    training_meshes: Mutex<Option<(ModelKey, NamedMeshes)>>,
 }
 
 /// Models kept loaded at once (each holds its weights and latents).
@@ -62,6 +66,9 @@ const CACHED_REFERENCES: usize = 8;
 
 /// A model directory and what it holds.
 type ModelKey = (PathBuf, DirStamp);
+
+/// A model's training meshes with their names, in training order.
+type NamedMeshes = Arc<Vec<(String, TriMesh)>>;
 
 /// A model directory, what it holds, and a resolution.
 type ReferenceKey = (PathBuf, DirStamp, usize);
@@ -82,6 +89,7 @@ impl SdfEngine {
             chamfer_points: DEFAULT_CHAMFER_POINTS,
             models: Mutex::new(BoundedCache::new(CACHED_MODELS)),
             references: Mutex::new(BoundedCache::new(CACHED_REFERENCES)),
+            training_meshes: Mutex::new(None),
         }
     }
 
@@ -399,26 +407,80 @@ impl Engine for SdfEngine {
         let mesh = crate::formats::read_mesh_file(&spec.mesh_path)
             .with_context(|| format!("cannot read {}", spec.mesh_path.display()))?;
         mesh.validate().context("unusable mesh")?;
-        // A copy, so cohorts on the same model are not held up for the whole fit.
-        let model = {
-            let cached = self.model(model_dir)?;
-            let cached = cached
-                .lock()
-                .map_err(|_| anyhow::anyhow!("model poisoned"))?;
-            LoadedModel {
-                dir: cached.model.dir.clone(),
-                manifest: cached.model.manifest.clone(),
-                decoder: cached.model.decoder.clone(),
-            }
-        };
-        let mut settings = FitSettings::new(spec.seed);
-        settings.iterations = spec.iterations;
-        settings.evaluation.chamfer_points = self.chamfer_points;
-        settings.evaluation.extraction = self.extraction;
-        let fitted = fit_mesh(
+        let model = self.frozen_copy(model_dir)?;
+        self.fit(
             &model,
             &mesh,
-            &settings,
+            &self.fit_settings(spec.iterations, spec.seed),
+            cancel,
+            progress,
+        )
+    }
+
+    fn refit_training_shape(
+        &self,
+        model_dir: &Path,
+        index: usize,
+        spec: &RefitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        let model = self.frozen_copy(model_dir)?;
+        let meshes = self.training_meshes(model_dir, &model)?;
+        let (name, mesh) = meshes.get(index).with_context(|| {
+            format!(
+                "the model has {} training shapes, not {}",
+                meshes.len(),
+                index + 1
+            )
+        })?;
+        let recorded = &model.manifest.shapes[index].name;
+        anyhow::ensure!(
+            name == recorded,
+            "the training data changed: shape {index} is {name:?}, the model trained on {recorded:?}"
+        );
+        let settings = refit_settings(&self.fit_settings(spec.iterations, spec.seed), index);
+        self.fit(&model, mesh, &settings, cancel, progress)
+            .with_context(|| format!("training shape {index} ({name})"))
+    }
+}
+
+impl SdfEngine {
+    /// A copy of the model in `dir`, so cohorts on the same model are not held up for the
+    /// whole of a fit.
+    fn frozen_copy(&self, dir: &Path) -> anyhow::Result<LoadedModel> {
+        let cached = self.model(dir)?;
+        let cached = cached
+            .lock()
+            .map_err(|_| anyhow::anyhow!("model poisoned"))?;
+        Ok(LoadedModel {
+            dir: cached.model.dir.clone(),
+            manifest: cached.model.manifest.clone(),
+            decoder: cached.model.decoder.clone(),
+        })
+    }
+
+    /// The fit settings of this engine (its Chamfer sampling and extraction).
+    fn fit_settings(&self, iterations: usize, seed: u64) -> FitSettings {
+        let mut settings = FitSettings::new(seed);
+        settings.iterations = iterations;
+        settings.evaluation.chamfer_points = self.chamfer_points;
+        settings.evaluation.extraction = self.extraction;
+        settings
+    }
+
+    fn fit(
+        &self,
+        model: &LoadedModel,
+        mesh: &TriMesh,
+        settings: &FitSettings,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        let fitted = fit_mesh(
+            model,
+            mesh,
+            settings,
             &mut |p| progress.store(p.iteration as u64, Ordering::SeqCst),
             Some(cancel),
         )?;
@@ -427,6 +489,38 @@ impl Engine for SdfEngine {
             transform: fitted.transform,
             chamfer: fitted.chamfer,
         })
+    }
+
+    /// The training meshes of `model` (in `dir`), read from the data its manifest names
+    /// and split as in training; kept for the model last asked about.
+    fn training_meshes(&self, dir: &Path, model: &LoadedModel) -> anyhow::Result<NamedMeshes> {
+        let key = (
+            dir.to_path_buf(),
+            DirStamp::of(dir)
+                .with_context(|| format!("cannot read the model in {}", dir.display()))?,
+        );
+        let mut kept = self
+            .training_meshes
+            .lock()
+            .map_err(|_| anyhow::anyhow!("training mesh cache poisoned"))?;
+        if let Some((k, meshes)) = kept.as_ref()
+            && *k == key
+        {
+            return Ok(meshes.clone());
+        }
+        let manifest = &model.manifest;
+        let training = load_split(&manifest.data.source, manifest.data.holdout.as_ref())
+            .context("cannot read the model's training data")?
+            .training;
+        anyhow::ensure!(
+            training.len() == manifest.shapes.len(),
+            "the training data gives {} training shapes, the model has {}",
+            training.len(),
+            manifest.shapes.len()
+        );
+        let meshes = Arc::new(training);
+        *kept = Some((key, meshes.clone()));
+        Ok(meshes)
     }
 }
 

@@ -57,6 +57,7 @@ impl From<JobRow> for JobView {
             Ok(Job::Training(p)) => Some(format!("/v1/models/{}", p.model_id)),
             Ok(Job::Fit(p)) => Some(format!("/v1/anchors/{}", p.anchor_id)),
             Ok(Job::Validation(p)) => Some(format!("/v1/validations/{}", p.validation_id)),
+            Ok(Job::Refit(p)) => Some(format!("/v1/models/{}/refit", p.model_id)),
             Err(_) => None,
         };
         Self {

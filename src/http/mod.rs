@@ -19,6 +19,7 @@ pub mod metrics;
 pub mod model_upload;
 pub mod models;
 pub mod openapi;
+pub mod refits;
 pub mod rendering;
 pub mod reports;
 pub mod server;
@@ -78,6 +79,7 @@ pub fn api_router() -> OpenApiRouter<AppState> {
         .merge(metrics::router())
         .merge(models::router())
         .merge(anchors::router())
+        .merge(refits::router())
         .merge(cohorts::router())
         .merge(shapes::router())
         .merge(simulation_meshes::router())

@@ -32,6 +32,8 @@ pub struct ModelView {
     pub reconstruction_cd: Option<CdSummary>,
     /// Its training shapes.
     pub shapes_url: String,
+    /// Its training shapes re-fitted with the network frozen (404 until requested).
+    pub refit_url: String,
 }
 
 /// Summary of reconstruction Chamfer distances.
@@ -92,6 +94,7 @@ impl ModelView {
         });
         Self {
             shapes_url: format!("/v1/models/{}/shapes", row.model_id),
+            refit_url: format!("/v1/models/{}/refit", row.model_id),
             id: row.model_id,
             status: row.status,
             created_at: row.created_at,
@@ -158,6 +161,11 @@ async fn delete_model(State(state): State<AppState>, Path(id): Path<String>) -> 
     if model.status == ModelStatus::Training {
         return Err(ApiError::Conflict(format!(
             "model {id:?} is still training"
+        )));
+    }
+    if super::refits::is_running(&state, &id).await? {
+        return Err(ApiError::Conflict(format!(
+            "model {id:?} is being re-fitted; cancel its refit job first"
         )));
     }
     let cohorts = db::models::cohort_count(&state.pool, &id).await?;

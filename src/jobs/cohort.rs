@@ -15,7 +15,7 @@ use super::{
 };
 use crate::cohort::{
     CohortError, CohortGenerator, CohortPlan, CohortRequest, CohortSetup, CohortShape,
-    EngineHandle, ModelLatents,
+    EngineHandle, LatentSource, ModelLatents,
 };
 use crate::db::tasks::NewTask;
 use crate::db::{self, cohorts::CohortRow, jobs::FinalStatus, models::ModelRow, states::TaskKind};
@@ -390,6 +390,13 @@ impl Generation<'_> {
             resolution: self.request.resolution,
         };
         let reference = setup::novelty_reference(ctx, &source).await?;
+        // The service's own refit of the model comes before a refits.json beside it.
+        let refitted = match self.request.sampler.latent_source() {
+            Some(LatentSource::Refitted) => {
+                db::refits::latents(&ctx.pool, &self.model.model_id, count).await?
+            }
+            _ => None,
+        };
         let engine = ctx.engine.clone();
         let request = self.request.clone();
         let handle = EngineHandle {
@@ -399,7 +406,7 @@ impl Generation<'_> {
             cancel: self.run.flag.clone(),
         };
         let built = spawn_background(move || -> Result<CohortGenerator, JobError> {
-            let latents = ModelLatents::read(&*engine, &model_dir, &request, count)?;
+            let latents = ModelLatents::read(&*engine, &model_dir, &request, count, refitted)?;
             let plan = CohortPlan::new(&request, count, latents.as_ref(), anchors)?;
             let setup = CohortSetup {
                 reference,

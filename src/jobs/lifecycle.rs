@@ -7,7 +7,7 @@
 
 use anyhow::Context;
 
-use super::{Job, JobContext, cohort};
+use super::{Job, JobContext, cohort, refit};
 use crate::db::tasks::NewTask;
 use crate::db::{
     self,
@@ -54,7 +54,7 @@ pub async fn finish_job(
             let reason = error.unwrap_or("cancelled");
             db::anchors::set_failed(conn, p.anchor_id, reason).await?;
         }
-        Ok(Job::Cohort(_) | Job::Validation(_)) | Err(_) => {}
+        Ok(Job::Cohort(_) | Job::Validation(_) | Job::Refit(_)) | Err(_) => {}
     }
     Ok(true)
 }
@@ -101,10 +101,16 @@ pub async fn plan(pool: &db::Pool, job_id: i64) -> anyhow::Result<()> {
         Ok(Job::Training(_)) => Ok(vec![NewTask::whole(TaskKind::Training)]),
         Ok(Job::Fit(_)) => Ok(vec![NewTask::whole(TaskKind::Fit)]),
         Ok(Job::Validation(_)) => Ok(vec![NewTask::whole(TaskKind::Validation)]),
+        Ok(Job::Refit(p)) => refit::plan(pool, &p).await,
         Err(e) => Err(anyhow::anyhow!("bad job payload: {e}")),
     };
     let mut tx = db::begin_write(pool).await?;
     match planned {
+        // Everything the job would make exists already (a refit retried after its last
+        // shape was stored): it has nothing left to do.
+        Ok(tasks) if tasks.is_empty() => {
+            finish_job(&mut tx, job_id, FinalStatus::Succeeded, None).await?;
+        }
         Ok(tasks) => {
             let added = db::tasks::insert_missing(&mut tx, job_id, &tasks).await?;
             tracing::debug!(job_id, tasks = added, "job planned");

@@ -1,7 +1,7 @@
 //! Background work: a durable queue in the `job` table ([`queue`] is the one way in), jobs
 //! planned into tasks ([`lifecycle`]: a cohort's setup steps, one task per shape and its
-//! metrics step; a training; a fit), and workers in any process on any machine that claim
-//! tasks under leases and run them ([`worker`]). Heavy work goes to background threads
+//! metrics step; a training; a fit; a refit, one task per training shape), and workers in
+//! any process on any machine that claim tasks under leases and run them ([`worker`]). Heavy work goes to background threads
 //! ([`priority::spawn_background`]); a panic there fails the task and its job, never the
 //! worker.
 
@@ -10,6 +10,7 @@ pub mod fit;
 pub mod lifecycle;
 pub mod priority;
 pub mod queue;
+pub mod refit;
 pub mod remeasure;
 pub mod setup;
 pub mod simulation;
@@ -50,6 +51,8 @@ pub enum Job {
     Fit(fit::FitPayload),
     /// Validate a cohort against a reference population.
     Validation(validation::ValidationPayload),
+    /// Fit a model's training shapes again with the network frozen.
+    Refit(refit::RefitPayload),
 }
 
 impl Job {
@@ -60,6 +63,7 @@ impl Job {
             Self::Training(_) => JobKind::Training,
             Self::Fit(_) => JobKind::Fit,
             Self::Validation(_) => JobKind::Validation,
+            Self::Refit(_) => JobKind::Refit,
         }
     }
 
@@ -70,6 +74,7 @@ impl Job {
             Self::Training(p) => serde_json::to_string(p),
             Self::Fit(p) => serde_json::to_string(p),
             Self::Validation(p) => serde_json::to_string(p),
+            Self::Refit(p) => serde_json::to_string(p),
         };
         json.expect("payloads serialise")
     }
@@ -81,6 +86,7 @@ impl Job {
             JobKind::Training => Self::Training(serde_json::from_str(payload)?),
             JobKind::Fit => Self::Fit(serde_json::from_str(payload)?),
             JobKind::Validation => Self::Validation(serde_json::from_str(payload)?),
+            JobKind::Refit => Self::Refit(serde_json::from_str(payload)?),
         })
     }
 }
@@ -515,6 +521,7 @@ async fn run_task(ctx: &JobContext, run: &TaskRun) -> Result<(), JobError> {
         (Job::Training(p), TaskKind::Training) => training::run(ctx, run, p).await,
         (Job::Fit(p), TaskKind::Fit) => fit::run(ctx, run, p).await,
         (Job::Validation(p), TaskKind::Validation) => validation::run(ctx, run, p).await,
+        (Job::Refit(p), TaskKind::Refit) => refit::shape(ctx, run, p).await,
         (_, kind) => Err(JobError::Failed(anyhow!(
             "a {} job has no {kind} task",
             row.kind

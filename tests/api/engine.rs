@@ -9,8 +9,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use aortagen::engine::{
-    Engine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, ShapeSpec, TrainingShapeInfo,
-    TrainingSpec,
+    Engine, FitSpec, FittedAnchor, GeneratedShape, ModelInfo, RefitSpec, ShapeSpec, TrainingSpec,
 };
 use aortagen::geometry::TriMesh;
 use aortagen::geometry::chamfer::chamfer_distance;
@@ -65,22 +64,38 @@ pub struct AnalyticEngine {
     pub panic_on_call: Option<usize>,
     /// `training_surface` calls so far (the novelty reference's setup work).
     pub surfaces_built: AtomicUsize,
+    /// `refit_training_shape` calls so far.
+    pub refit_calls: AtomicUsize,
+    /// The training shape whose refit fails until `refit_mended` is set.
+    pub refit_breaks_at: Option<usize>,
+    /// Lets the broken refit succeed.
+    pub refit_mended: AtomicBool,
+}
+
+/// How much larger a re-fitted ellipsoid is than its training latent says: re-fitted
+/// latents differ from the training ones, as a network-frozen fit's do.
+pub const REFIT_SCALE: f64 = 1.1;
+
+/// The re-fitted latent of training shape `index` with refit seed `seed`: its semi-axes
+/// scaled by [`REFIT_SCALE`], plus 0.001 mm × the shape's own seed (seed + 2 index) on the
+/// first axis, so a test can tell which seed a shape was fitted with.
+pub fn refitted_axes(index: usize, seed: u64) -> [f64; 3] {
+    let mut axes = training_axes(index).map(|a| a * REFIT_SCALE);
+    axes[0] += 0.001 * (seed + 2 * index as u64) as f64;
+    axes
 }
 
 impl Engine for AnalyticEngine {
     fn model_info(&self, _: &Path) -> anyhow::Result<ModelInfo> {
-        Ok(ModelInfo {
-            latent_dim: 3,
-            architecture: serde_json::json!({ "kind": "analytic ellipsoids" }),
-            training_shapes: (0..TRAINING_SHAPES)
-                .map(|index| TrainingShapeInfo {
-                    index,
-                    name: format!("ellipsoid-{index}"),
-                    reconstruction_cd: Some(0.001 * (index + 1) as f64),
-                })
-                .collect(),
-            refitted_latents: false,
-        })
+        let mut info = ModelInfo::with_shapes(
+            3,
+            (0..TRAINING_SHAPES).map(|index| format!("ellipsoid-{index}")),
+        );
+        info.architecture = serde_json::json!({ "kind": "analytic ellipsoids" });
+        for shape in &mut info.training_shapes {
+            shape.reconstruction_cd = Some(0.001 * (shape.index + 1) as f64);
+        }
+        Ok(info)
     }
 
     fn training_latents(&self, _: &Path) -> anyhow::Result<Vec<Vec<f32>>> {
@@ -241,6 +256,33 @@ impl Engine for AnalyticEngine {
             latent: axes.iter().map(|&a| a as f32).collect(),
             transform,
             chamfer: chamfer_distance(&fitted.positions, &unit.positions),
+        })
+    }
+
+    fn refit_training_shape(
+        &self,
+        _: &Path,
+        index: usize,
+        spec: &RefitSpec,
+        cancel: &AtomicBool,
+        progress: &AtomicU64,
+    ) -> anyhow::Result<FittedAnchor> {
+        self.refit_calls.fetch_add(1, Ordering::SeqCst);
+        anyhow::ensure!(!cancel.load(Ordering::SeqCst), "refit cancelled");
+        anyhow::ensure!(index < TRAINING_SHAPES, "no training shape {index}");
+        anyhow::ensure!(
+            self.refit_breaks_at != Some(index) || self.refit_mended.load(Ordering::SeqCst),
+            "the analytic engine cannot fit ellipsoid-{index}"
+        );
+        let axes = refitted_axes(index, spec.seed);
+        progress.store(spec.iterations as u64, Ordering::SeqCst);
+        Ok(FittedAnchor {
+            latent: axes.iter().map(|&a| a as f32).collect(),
+            transform: UnitBallTransform {
+                centre: CENTRE_MM,
+                radius: axes.iter().cloned().fold(0.0, f64::max),
+            },
+            chamfer: 1e-4 * (index + 1) as f64,
         })
     }
 }

@@ -25,6 +25,7 @@ mod object_store;
 mod openapi;
 mod pipeline;
 mod process;
+mod refits;
 mod reports;
 mod resume;
 mod schema;

@@ -20,6 +20,7 @@ use aortagen::sdf::backend::Backend;
 use aortagen::sdf::inference::reconstruct::ExtractionMethod;
 use aortagen::sdf::store::anchors::{Anchor, AnchorSet};
 use aortagen::sdf::store::read_manifest;
+use aortagen::sdf::store::refits::RefitSet;
 use axum::http::StatusCode;
 use serde_json::{Value, json};
 
@@ -318,6 +319,45 @@ async fn the_command_line_and_the_service_generate_the_same_cohort() {
             "another density, another shape"
         );
     }
+
+    // The service re-fits the shapes itself (`POST /v1/models/default/refit`) with the same
+    // settings: the same latents and transforms to the bit as `aortagen refit`'s, so its
+    // cohorts, now drawn from its own refit, are still the command line's.
+    let r = app
+        .post_json(
+            "/v1/models/default/refit",
+            &json!({ "iterations": 20, "seed": 0 }),
+        )
+        .await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.detail());
+    app.run_pending_jobs().await;
+    let served = app.get("/v1/models/default/refit").await.json();
+    assert_eq!(served["status"], "ready", "{served}");
+    let manifest = read_manifest(&model).unwrap();
+    let file = RefitSet::load(&model, &manifest).unwrap();
+    let shapes = served["shapes"].as_array().unwrap();
+    assert_eq!(shapes.len(), file.shapes.len());
+    for (served, fitted) in shapes.iter().zip(&file.shapes) {
+        let latent: Vec<f32> = served["latent"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap() as f32)
+            .collect();
+        assert_eq!(latent, fitted.latent, "shape {}", fitted.name);
+        assert_eq!(served["name"], fitted.name.as_str());
+        assert_eq!(served["transform"]["radius"], fitted.transform.radius);
+        assert_eq!(served["seed"], fitted.seed);
+    }
+    assert_same_cohort(
+        &app,
+        &model,
+        &Request {
+            seed: 14,
+            ..refitted
+        },
+    )
+    .await;
 }
 
 #[tokio::test(flavor = "multi_thread")]

@@ -257,7 +257,7 @@ fn refitting_fits_every_training_shape_resumes_exactly_and_feeds_a_density_sampl
     };
     let read = |latents| {
         let request = CohortRequest::parse(fields(latents), RequestLimits::NONE, || 0).unwrap();
-        let read = ModelLatents::read(&engine, dir.path(), &request, SHAPES)
+        let read = ModelLatents::read(&engine, dir.path(), &request, SHAPES, None)
             .unwrap()
             .unwrap();
         let plan = CohortPlan::new(&request, SHAPES, Some(&read), Vec::new()).unwrap();

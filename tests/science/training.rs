@@ -506,18 +506,8 @@ mod cohort {
             ..CohortFields::default()
         };
         let request = CohortRequest::parse(fields, RequestLimits::NONE, || seed)?;
-        let model = aortagen::engine::ModelInfo {
-            latent_dim: 4,
-            architecture: serde_json::Value::Null,
-            training_shapes: (0..SHAPES)
-                .map(|index| aortagen::engine::TrainingShapeInfo {
-                    index,
-                    name: format!("shape-{index}"),
-                    reconstruction_cd: None,
-                })
-                .collect(),
-            refitted_latents: false,
-        };
+        let model =
+            aortagen::engine::ModelInfo::with_shapes(4, (0..SHAPES).map(|i| format!("shape-{i}")));
         request.check_model(&model)?;
         Ok(request)
     }

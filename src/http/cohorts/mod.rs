@@ -121,10 +121,18 @@ async fn create_cohort(
     Ok(accepted(cohort, false))
 }
 
-/// Whether every training shape of the model has a re-fitted latent now: asked of the
-/// engine, since `aortagen refit` may have run on the model's directory after the model
-/// was registered. An unreadable file counts as none (and is logged).
+/// Whether every training shape of the model has a re-fitted latent now: from the
+/// service's refit (`POST /v1/models/{id}/refit`), else asked of the engine, since
+/// `aortagen refit` may have run on the model's directory after the model was registered.
+/// An unreadable file counts as none (and is logged).
 async fn has_refitted_latents(state: &AppState, model: &ModelRow) -> Result<bool> {
+    let count = model.info().map_or(0, |i| i.training_shape_count());
+    if db::refits::latents(&state.pool, &model.model_id, count)
+        .await?
+        .is_some()
+    {
+        return Ok(true);
+    }
     let model_dir = state.jobs.model_dir(model).await?;
     let engine = state.jobs.engine.clone();
     let found = tokio::task::spawn_blocking(move || engine.refitted_latents(&model_dir))
