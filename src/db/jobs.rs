@@ -236,6 +236,14 @@ pub async fn get(pool: &super::Pool, job_id: i64) -> sqlx::Result<Option<JobRow>
     .await
 }
 
+/// Payloads of the training jobs, newest first (a deleted model's id may have trained
+/// again: its newest training is the current model's).
+pub async fn training_payloads(pool: &super::Pool) -> sqlx::Result<Vec<String>> {
+    sqlx::query_scalar("select payload from job where kind = 'training' order by job_id desc")
+        .fetch_all(pool)
+        .await
+}
+
 /// Jobs waiting or running: the queue length that bounds new submissions.
 pub async fn count_pending<'e>(
     ex: impl sqlx::Executor<'e, Database = sqlx::Any>,

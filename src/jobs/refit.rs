@@ -65,6 +65,7 @@ pub(super) async fn shape(
     };
     let index = usize::try_from(run.lease.item).context("the task's shape index")?;
     let model_dir = ctx.model_dir(&model).await?;
+    super::training::ensure_training_inputs(ctx, &model.model_id).await?;
     let engine = ctx.engine.clone();
     let (flag, steps) = (run.flag.clone(), run.progress.clone());
     // The steps go to the task's counter (lease renewals report them, so a long fit is never

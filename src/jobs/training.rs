@@ -62,3 +62,26 @@ pub(super) async fn run(
 
 /// How often the saved epochs of a running training are copied to the job row.
 const PROGRESS_INTERVAL: Duration = Duration::from_secs(1);
+
+/// Makes the uploaded training meshes of a model the service trained readable on this
+/// machine at the path its manifest names, fetching them from the object store when this
+/// machine lacks them (the upload reached another machine's API): a refit or a validation
+/// against the model's own shapes reads them. Models the service did not train (the
+/// bundled one, or one registered from a directory) are left alone.
+pub(super) async fn ensure_training_inputs(ctx: &JobContext, model_id: &str) -> anyhow::Result<()> {
+    for payload in db::jobs::training_payloads(&ctx.pool).await? {
+        let Ok(training) = serde_json::from_str::<TrainingPayload>(&payload) else {
+            continue;
+        };
+        if training.model_id != model_id {
+            continue;
+        }
+        if let Some(digest) = &training.spec.input_digest {
+            crate::objects::bundle::ensure_unpacked(&ctx.objects, digest, &training.spec.input_dir)
+                .await
+                .context("the model's training inputs")?;
+        }
+        return Ok(());
+    }
+    Ok(())
+}

@@ -147,6 +147,14 @@ pub(super) async fn run(
         }),
         sha256: None,
     };
+    // Without them a validation against an uploaded reference goes on without the
+    // training shapes (and says so); one against the model's own shapes fails naming them.
+    if let Err(e) = super::training::ensure_training_inputs(ctx, &model.model_id).await {
+        tracing::warn!(
+            error = format!("{e:#}"),
+            "the model's training inputs are missing"
+        );
+    }
     let (settings_for_read, dir) = (settings.clone(), model_dir.clone());
     let compared = super::priority::spawn_background(move || {
         compared_populations(&settings_for_read, &dir, uploaded, stored)

@@ -218,6 +218,57 @@ async fn a_cancelled_refit_is_continued_by_asking_again() {
     assert_eq!(ready["shapes"][4]["seed"], 2 + 2 * 4);
 }
 
+/// The files of a directory with their bytes, by name.
+fn files_of(dir: &std::path::Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let path = e.unwrap().path();
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            (name, std::fs::read(&path).unwrap())
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+#[tokio::test]
+async fn a_worker_without_the_uploaded_meshes_fetches_them_before_re_fitting() {
+    let app = spawn_app().await;
+    let stl = |rings| {
+        write_mesh(
+            &uv_sphere(rings, 8),
+            MeshFormat::Stl,
+            &MeshMetadata::new("mm"),
+        )
+    };
+    let upload = app
+        .upload_model(&[
+            ("id", None, b"uploaded".to_vec()),
+            ("files", Some("a.stl"), stl(6).unwrap()),
+            ("files", Some("b.stl"), stl(8).unwrap()),
+        ])
+        .await;
+    assert_eq!(upload.status, StatusCode::ACCEPTED, "{}", upload.detail());
+    app.run_pending_jobs().await;
+    // What a worker on another machine sees: the model, but not the upload's directory.
+    let input = app.dir.path().join("models/uploaded/input");
+    let uploaded = files_of(&input);
+    assert_eq!(uploaded.len(), 2);
+    std::fs::remove_dir_all(&input).unwrap();
+    let r = app.post_json("/v1/models/uploaded/refit", &json!({})).await;
+    assert_eq!(r.status, StatusCode::ACCEPTED, "{}", r.detail());
+    app.run_pending_jobs().await;
+    let refit = app.get("/v1/models/uploaded/refit").await.json();
+    assert_eq!(refit["status"], "ready", "{refit}");
+    assert_eq!(refit["progress"], json!({ "done": 2, "total": 2 }));
+    assert_eq!(
+        files_of(&input),
+        uploaded,
+        "the same meshes, from the object store"
+    );
+}
+
 #[tokio::test]
 async fn bad_refit_requests_are_refused_naming_the_field_and_store_nothing() {
     let app = spawn_app().await;
