@@ -48,13 +48,7 @@ pub struct AnchorRow {
 impl AnchorRow {
     /// The latent values, when fitted.
     pub fn latent_values(&self) -> Option<Vec<f32>> {
-        let bytes = self.latent.as_ref()?;
-        Some(
-            bytes
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect(),
-        )
+        self.latent.as_deref().map(super::latent_values)
     }
 
     /// The unit-ball transform, when fitted.
@@ -133,7 +127,7 @@ pub async fn set_fitted<'e>(
     chamfer: f64,
     transform: &crate::geometry::normalize::UnitBallTransform,
 ) -> sqlx::Result<()> {
-    let blob: Vec<u8> = latent.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let blob = super::latent_blob(latent);
     sqlx::query(
         "update anchor set status = 'ready', latent = $1, chamfer = $2, centre_x = $3,
              centre_y = $4, centre_z = $5, radius = $6, error = null,

@@ -28,7 +28,7 @@ use anyhow::Context;
 use sqlx::Connection;
 use sqlx::any::{AnyConnectOptions, AnyPoolOptions};
 
-pub use values::{Flag, Json, NullableDouble};
+pub use values::{Flag, Json, NullableDouble, latent_blob, latent_values};
 
 mod values;
 

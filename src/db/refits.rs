@@ -44,10 +44,7 @@ pub struct RefitShapeRow {
 impl RefitShapeRow {
     /// The latent values.
     pub fn latent_values(&self) -> Vec<f32> {
-        self.latent
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect()
+        super::latent_values(&self.latent)
     }
 
     /// The unit-ball transform of the fitted shape.
@@ -111,7 +108,7 @@ pub async fn insert_shape(
     shape_index: i64,
     fitted: &FittedAnchor,
 ) -> sqlx::Result<()> {
-    let blob: Vec<u8> = fitted.latent.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let blob = super::latent_blob(&fitted.latent);
     sqlx::query(
         "insert into refit_shape (model_id, shape_index, latent, chamfer, centre_x, centre_y,
              centre_z, radius)

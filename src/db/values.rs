@@ -119,3 +119,29 @@ impl Encode<'_, Any> for NullableDouble {
         }
     }
 }
+
+/// A latent as stored: its f32 values little-endian, one after another (`blob`/`bytea`).
+pub fn latent_blob(latent: &[f32]) -> Vec<u8> {
+    latent.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+/// The values of a stored latent (see [`latent_blob`]).
+pub fn latent_values(blob: &[u8]) -> Vec<f32> {
+    blob.chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn latents_are_stored_as_little_endian_f32_and_read_back_exactly() {
+        let latent = [1.0_f32, -2.25, f32::MIN_POSITIVE, 3.0e-8];
+        let blob = latent_blob(&latent);
+        assert_eq!(&blob[..8], &[0, 0, 0x80, 0x3f, 0, 0, 0x10, 0xc0]);
+        assert_eq!(blob.len(), 16);
+        assert_eq!(latent_values(&blob), latent);
+    }
+}

@@ -210,6 +210,17 @@ pub struct FittedAnchor {
     pub chamfer: f64,
 }
 
+impl FittedAnchor {
+    /// Refuses a fit whose latent or Chamfer distance is not finite (nothing such is stored).
+    pub fn check_finite(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.chamfer.is_finite() && self.latent.iter().all(|v| v.is_finite()),
+            "the engine returned a non-finite latent or Chamfer distance"
+        );
+        Ok(())
+    }
+}
+
 /// The science engine, as the job worker calls it. Every method is blocking CPU work and is
 /// called inside `spawn_blocking`.
 pub trait Engine: Send + Sync + 'static {

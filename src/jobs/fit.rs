@@ -51,10 +51,7 @@ pub(super) async fn run(
     })
     .await?;
     let fitted = fitted.map_err(|e| stopped_or_failed(&run.flag, e.context("fitting")))?;
-    if !(fitted.chamfer.is_finite() && fitted.latent.iter().all(|v| v.is_finite())) {
-        let e = anyhow::anyhow!("the engine returned a non-finite latent or Chamfer distance");
-        return Err(e.into());
-    }
+    fitted.check_finite()?;
     let mut tx = db::begin_write(&ctx.pool).await?;
     db::tasks::complete(&mut tx, &run.lease).await?;
     db::anchors::set_fitted(

@@ -77,10 +77,7 @@ pub(super) async fn shape(
     .map_err(join_error)
     .and_then(|r| r)
     .map_err(|e| super::stopped_or_failed(&run.flag, e.context("re-fitting")))?;
-    if !(fitted.chamfer.is_finite() && fitted.latent.iter().all(|v| v.is_finite())) {
-        let e = anyhow::anyhow!("the engine returned a non-finite latent or Chamfer distance");
-        return Err(e.into());
-    }
+    fitted.check_finite()?;
     let job_id = run.lease.job_id;
     let mut tx = db::begin_write(&ctx.pool).await?;
     db::tasks::complete(&mut tx, &run.lease).await?;
