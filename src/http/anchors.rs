@@ -12,7 +12,7 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 
 use super::AppState;
 use super::error::{ApiError, Problem, Result};
-use super::extractors::{ApiQuery, parse_id};
+use super::extractors::{ApiQuery, bounded, parse_id};
 use super::model_upload::{body_error, is_zip_body, parse_number, unpack_blocking, validate_mesh};
 use super::upload_archive::{ArchiveLimits, Unpacked, count_files, looks_like_zip};
 use crate::db::states::{AnchorStatus, JobStatus, ModelStatus};
@@ -202,11 +202,12 @@ async fn fit_model(
         )));
     }
     let upload = read_upload(&state, query, request).await?;
-    let iterations = upload.iterations.unwrap_or(DEFAULT_FIT_ITERATIONS as u64);
-    if !(1..=MAX_FIT_ITERATIONS as u64).contains(&iterations) {
-        let msg = format!("must be an integer from 1 to {MAX_FIT_ITERATIONS}, got {iterations}");
-        return Err(ApiError::invalid("iterations", "range", msg));
-    }
+    let iterations = bounded(
+        "iterations",
+        upload.iterations,
+        MAX_FIT_ITERATIONS as u64,
+        DEFAULT_FIT_ITERATIONS as u64,
+    )?;
     if let Some(name) = &upload.name {
         check_name(name)?;
     }
@@ -251,7 +252,7 @@ async fn fit_model(
         model_id: model_id.clone(),
         spec: FitSpec {
             mesh_path: path.clone(),
-            iterations: iterations as usize,
+            iterations,
             seed: upload.seed,
             mesh_sha256: Some(mesh_sha256),
         },

@@ -179,6 +179,23 @@ pub fn parse_id(what: &'static str, raw: &str) -> Result<i64, ApiError> {
         .ok_or_else(|| ApiError::not_found(what, raw))
 }
 
+/// A number within `1..=max`, named on `field`, or its default.
+pub(super) fn bounded(
+    field: &str,
+    value: Option<u64>,
+    max: u64,
+    default: u64,
+) -> Result<usize, ApiError> {
+    match value {
+        None => Ok(default as usize),
+        Some(v) if (1..=max).contains(&v) => Ok(v as usize),
+        Some(v) => {
+            let msg = format!("must be an integer from 1 to {max}, got {v}");
+            Err(ApiError::invalid(field, "range", msg))
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

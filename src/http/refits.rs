@@ -18,7 +18,7 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::anchors::TransformView;
 use super::error::{ApiError, Problem, Result};
-use super::extractors::ApiJson;
+use super::extractors::{ApiJson, bounded};
 use crate::db::refits::{RefitRow, RefitShapeRow};
 use crate::db::states::{JobStatus, ModelStatus};
 use crate::db::{self, jobs::JobRow, models::ModelRow};
@@ -199,14 +199,12 @@ async fn create_refit(
     Path(id): Path<String>,
     ApiJson(body): ApiJson<CreateRefit>,
 ) -> Result<Response> {
-    let iterations = match body.iterations {
-        None => DEFAULT_FIT_ITERATIONS as i64,
-        Some(n) if (1..=MAX_FIT_ITERATIONS as u64).contains(&n) => n as i64,
-        Some(n) => {
-            let msg = format!("must be an integer from 1 to {MAX_FIT_ITERATIONS}, got {n}");
-            return Err(ApiError::invalid("iterations", "range", msg));
-        }
-    };
+    let iterations = bounded(
+        "iterations",
+        body.iterations,
+        MAX_FIT_ITERATIONS as u64,
+        DEFAULT_FIT_ITERATIONS as u64,
+    )? as i64;
     let seed = match body.seed {
         None => 0,
         Some(s) => i64::try_from(s).map_err(|_| {

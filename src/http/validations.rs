@@ -22,7 +22,7 @@ use utoipa_axum::{router::OpenApiRouter, routes};
 use super::AppState;
 use super::anchors::check_name;
 use super::error::{ApiError, Problem, Result};
-use super::extractors::{ApiJson, ApiQuery, parse_id};
+use super::extractors::{ApiJson, ApiQuery, bounded, parse_id};
 use super::model_upload::{body_error, is_zip_body, read_valid_mesh, unpack_blocking};
 use super::upload_archive::{ArchiveLimits, Unpacked, looks_like_zip};
 use crate::db::states::{JobStatus, ModelStatus};
@@ -618,18 +618,6 @@ impl ValidationView {
                 report_html: format!("/v1/validations/{id}/report.html"),
             },
         })
-    }
-}
-
-/// A number within `1..=max`, named on `field`, or its default.
-fn bounded(field: &str, value: Option<u64>, max: u64, default: u64) -> Result<usize> {
-    match value {
-        None => Ok(default as usize),
-        Some(v) if (1..=max).contains(&v) => Ok(v as usize),
-        Some(v) => {
-            let msg = format!("must be an integer from 1 to {max}, got {v}");
-            Err(ApiError::invalid(field, "range", msg))
-        }
     }
 }
 

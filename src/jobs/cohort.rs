@@ -86,9 +86,7 @@ async fn load(pool: &db::Pool, payload: &CohortPayload) -> anyhow::Result<(Cohor
         .await?
         .with_context(|| format!("cohort {} no longer exists", payload.cohort_id))?;
     tracing::Span::current().record("cohort_id", cohort.cohort_id);
-    let model = db::models::get(pool, &cohort.model_id)
-        .await?
-        .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
+    let model = super::existing_model(pool, &cohort.model_id).await?;
     Ok((cohort, model))
 }
 

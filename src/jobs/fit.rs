@@ -35,9 +35,7 @@ pub(super) async fn run(
 ) -> Result<(), JobError> {
     tracing::Span::current().record("model_id", payload.model_id.as_str());
     stopped(&run.flag)?;
-    let model = db::models::get(&ctx.pool, &payload.model_id)
-        .await?
-        .with_context(|| format!("model {:?} no longer exists", payload.model_id))?;
+    let model = super::existing_model(&ctx.pool, &payload.model_id).await?;
     if let Some(sha) = &payload.spec.mesh_sha256 {
         crate::objects::bundle::ensure_file(&ctx.objects, sha, &payload.spec.mesh_path)
             .await

@@ -682,6 +682,13 @@ where
     }
 }
 
+/// The model a job works on, or an error saying it was deleted meanwhile.
+async fn existing_model(pool: &db::Pool, model_id: &str) -> anyhow::Result<db::models::ModelRow> {
+    db::models::get(pool, model_id)
+        .await?
+        .ok_or_else(|| anyhow!("model {model_id:?} no longer exists"))
+}
+
 /// An engine error, or [`JobError::Stopped`] when it came from the raised cancel flag.
 fn stopped_or_failed(flag: &AtomicBool, error: anyhow::Error) -> JobError {
     match flag.load(Ordering::SeqCst) {

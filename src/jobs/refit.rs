@@ -24,9 +24,7 @@ pub struct RefitPayload {
 
 /// One task per training shape without a stored fit.
 pub(super) async fn plan(pool: &db::Pool, payload: &RefitPayload) -> anyhow::Result<Vec<NewTask>> {
-    let model = db::models::get(pool, &payload.model_id)
-        .await?
-        .with_context(|| format!("model {:?} no longer exists", payload.model_id))?;
+    let model = super::existing_model(pool, &payload.model_id).await?;
     let count = model
         .info()
         .with_context(|| format!("model {:?} is not trained", model.model_id))?
@@ -53,9 +51,7 @@ pub(super) async fn shape(
 ) -> Result<(), JobError> {
     tracing::Span::current().record("model_id", payload.model_id.as_str());
     stopped(&run.flag)?;
-    let model = db::models::get(&ctx.pool, &payload.model_id)
-        .await?
-        .with_context(|| format!("model {:?} no longer exists", payload.model_id))?;
+    let model = super::existing_model(&ctx.pool, &payload.model_id).await?;
     let refit = db::refits::get(&ctx.pool, &model.model_id)
         .await?
         .with_context(|| format!("model {:?} has no refit", model.model_id))?;

@@ -111,9 +111,7 @@ pub(super) async fn run(
         .with_context(|| format!("cohort {} no longer exists", row.cohort_id))?;
     tracing::Span::current().record("cohort_id", cohort.cohort_id);
     tracing::Span::current().record("model_id", cohort.model_id.as_str());
-    let model = db::models::get(&ctx.pool, &cohort.model_id)
-        .await?
-        .with_context(|| format!("model {:?} no longer exists", cohort.model_id))?;
+    let model = super::existing_model(&ctx.pool, &cohort.model_id).await?;
     let model_dir = ctx.model_dir(&model).await?;
     let cohort_population = load_cohort(ctx, &cohort).await?;
     let uploaded = match row.reference_id {
